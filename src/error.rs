@@ -1,0 +1,67 @@
+//! The library's error type: every variant names the file, field or value at fault so the CLI can
+//! report it in one line.
+
+use std::path::PathBuf;
+
+/// Errors raised by specmux. Display renders one line that says what is wrong and where.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}:{line}: {msg}")]
+    Csv {
+        path: PathBuf,
+        line: usize,
+        msg: String,
+    },
+    #[error("{path}: {msg}")]
+    Exr { path: PathBuf, msg: String },
+    #[error("{path}: {msg}")]
+    Image { path: PathBuf, msg: String },
+    #[error("{file}: {msg}")]
+    Toml { file: String, msg: String },
+    /// A configuration value outside its valid range; names the key and the value.
+    #[error("{file}: `{key}` = {value}: {reason}")]
+    Config {
+        file: String,
+        key: String,
+        value: String,
+        reason: String,
+    },
+    /// A spectral curve that cannot be used (NaN, decreasing wavelengths, …).
+    #[error("{name}: {msg}")]
+    Curve { name: String, msg: String },
+    /// Shapes that do not agree (plane sizes, band counts).
+    #[error("shape mismatch: {0}")]
+    Shape(String),
+    /// A numerical problem the input makes unsolvable (a singular system, an empty window).
+    #[error("numerical: {0}")]
+    Numerical(String),
+}
+
+/// Result alias for the crate.
+pub type Result<T> = std::result::Result<T, Error>;
+
+impl Error {
+    /// Shorthand for a configuration error.
+    pub fn config(file: &str, key: &str, value: impl std::fmt::Display, reason: &str) -> Self {
+        Error::Config {
+            file: file.to_string(),
+            key: key.to_string(),
+            value: value.to_string(),
+            reason: reason.to_string(),
+        }
+    }
+
+    /// Wrap an I/O error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+}

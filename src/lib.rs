@@ -1,0 +1,12 @@
+//! specmux: a digital twin of a snapshot hyperspectral camera that multiplexes spectral channels
+//! in the Fourier domain (Deng et al., "Snapshot hyperspectral imaging via spectral basis
+//! multiplexing in Fourier domain"). The modules follow the light path: spectra and scenes, the
+//! rig's optics, the sensor, the reconstruction core, metrics and reports.
+
+pub mod atomic;
+pub mod error;
+pub mod scene;
+pub mod spectral;
+
+pub use error::{Error, Result};
+pub use scene::Cube;
