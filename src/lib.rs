@@ -10,3 +10,5 @@ pub mod spectral;
 
 pub use error::{Error, Result};
 pub use scene::Cube;
+pub mod optics;
+pub mod recon;

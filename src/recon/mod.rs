@@ -1,0 +1,7 @@
+//! The reconstruction core, the same code on the twin and on the rig: Fourier demultiplexing
+//! and per-pixel spectral unmixing.
+
+pub mod demux;
+pub mod fft2;
+
+pub use demux::Demux;
