@@ -3,5 +3,42 @@
 
 pub mod demux;
 pub mod fft2;
+pub mod qp;
 
 pub use demux::Demux;
+
+use crate::error::Result;
+use crate::recon::qp::{UnmixStats, Unmixer};
+use crate::rig::Rig;
+use crate::scene::{Cube, Experiment};
+
+/// Demultiplexer and unmixer for one rig, built once and applied to every frame.
+pub struct Reconstructor {
+    pub demux: Demux,
+    pub unmixer: Unmixer,
+}
+
+impl Reconstructor {
+    /// Build from the rig; with `patterns` (the patterns as imaged, or as calibrated on the rig)
+    /// the carrier gains are measured on them instead of taken from the design.
+    pub fn new(exp: &Experiment, rig: &Rig, patterns: Option<&Cube>) -> Result<Reconstructor> {
+        let mut demux = Demux::new(rig.width, rig.height, &rig.carriers, exp.reconstruct.crop);
+        if let Some(p) = patterns {
+            demux = demux.with_measured_gains(p)?;
+        }
+        // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
+        let eta = exp.reconstruct.eta / rig.grid.step_nm.powi(4);
+        let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
+        Ok(Reconstructor { demux, unmixer })
+    }
+
+    /// x̂: one plane per wheel channel.
+    pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
+        self.demux.run(frame)
+    }
+
+    /// r̂ = B α per pixel, non-negative.
+    pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
+        self.unmixer.unmix(xhat)
+    }
+}
