@@ -33,7 +33,14 @@ libdir="$llvm/usr/lib/x86_64-linux-gnu"
 fetch_deb() { # fetch_deb <package>: download and unpack one .deb into $llvm
     local pkg="$1" tmp
     tmp="$(mktemp -d)"
-    (cd "$tmp" && apt-get download -q "$pkg" >/dev/null 2>&1) || { rm -rf "$tmp"; return 1; }
+    if ! (cd "$tmp" && apt-get download -q "$pkg" >/dev/null 2>&1); then
+        # A fresh machine may have empty package lists: refresh them once (root only), retry.
+        if [ "$(id -u)" = 0 ] && [ -z "${apt_updated:-}" ]; then
+            apt_updated=1
+            apt-get update -qq >/dev/null 2>&1 || true
+        fi
+        (cd "$tmp" && apt-get download -q "$pkg" >/dev/null 2>&1) || { rm -rf "$tmp"; return 1; }
+    fi
     dpkg-deb -x "$tmp"/*.deb "$llvm"
     rm -rf "$tmp"
 }
