@@ -6,6 +6,7 @@ use super::fft2::{Fft2, HalfSpectrum};
 use crate::error::{Error, Result};
 use crate::optics::carriers::{window_bins, Carrier};
 use crate::scene::Cube;
+use rayon::prelude::*;
 use rustfft::num_complex::{Complex32, Complex64};
 
 /// A rectangular crop window: centre bin and size in bins; it spans [c − s/2, c − s/2 + s).
@@ -136,10 +137,11 @@ impl Demux {
         }
         let spec = self.spectrum(&frame.data);
         let mut out = Cube::zeros(frame.width, frame.height, self.windows.len());
-        for (i, (win, g)) in self.windows.iter().zip(&self.gains).enumerate() {
-            out.plane_mut(i)
-                .copy_from_slice(&self.extract(&spec, win, *g));
-        }
+        out.planes_mut()
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .zip(self.windows.par_iter().zip(&self.gains))
+            .for_each(|(plane, (win, g))| plane.copy_from_slice(&self.extract(&spec, win, *g)));
         Ok(out)
     }
 

@@ -94,27 +94,28 @@ impl Fft2 {
             || vec![Complex32::default(); self.col_inv.get_inplace_scratch_len()],
             |scratch, col| self.col_inv.process_with_scratch(col, scratch),
         );
+        // Rows of the (y, kx) matrix, contiguous, for the row pass.
+        let rows = transpose(&cols, kx_end, h);
         let norm = 1.0 / (w * h) as f32;
         let mut out = vec![0.0f32; w * h];
-        out.par_chunks_mut(w).enumerate().for_each_init(
-            || (self.c2r.make_input_vec(), self.c2r.make_scratch_vec()),
-            |(inp, scratch), (y, row)| {
-                for (kx, v) in inp.iter_mut().enumerate() {
-                    *v = if kx < kx_end {
-                        cols[kx * h + y] * norm
-                    } else {
-                        Complex32::default()
-                    };
-                }
-                inp[0].im = 0.0;
-                if w % 2 == 0 {
-                    inp[cw - 1].im = 0.0;
-                }
-                self.c2r
-                    .process_with_scratch(inp, row, scratch)
-                    .expect("imaginary parts of DC and Nyquist were zeroed");
-            },
-        );
+        out.par_chunks_mut(w)
+            .zip(rows.par_chunks(kx_end))
+            .for_each_init(
+                || (self.c2r.make_input_vec(), self.c2r.make_scratch_vec()),
+                |(inp, scratch), (row, spec)| {
+                    for (v, s) in inp.iter_mut().zip(spec) {
+                        *v = s * norm;
+                    }
+                    inp[kx_end..].fill(Complex32::default());
+                    inp[0].im = 0.0;
+                    if w % 2 == 0 {
+                        inp[cw - 1].im = 0.0;
+                    }
+                    self.c2r
+                        .process_with_scratch(inp, row, scratch)
+                        .expect("imaginary parts of DC and Nyquist were zeroed");
+                },
+            );
         out
     }
 }
