@@ -5,6 +5,8 @@
 
 pub mod atomic;
 pub mod error;
+pub mod metrics;
+pub mod recon;
 pub mod scene;
 pub mod spectral;
 
