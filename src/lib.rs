@@ -5,11 +5,6 @@
 
 pub mod atomic;
 pub mod error;
-pub mod scene;
-pub mod spectral;
-
-pub use error::{Error, Result};
-pub use scene::Cube;
 pub mod forward;
 pub mod metrics;
 pub mod optics;
@@ -17,3 +12,8 @@ pub mod recon;
 pub mod report;
 pub mod rig;
 pub mod run;
+pub mod scene;
+pub mod spectral;
+
+pub use error::{Error, Result};
+pub use scene::Cube;
