@@ -4,6 +4,7 @@
 use crate::error::Result;
 use crate::forward::{Pipeline, StageTime};
 use crate::metrics::{self, Metrics};
+use crate::recon::crosstalk::{self, ErrorBudget};
 use crate::recon::qp::UnmixStats;
 use crate::recon::Reconstructor;
 use crate::rig::Rig;
@@ -57,6 +58,8 @@ pub struct RunReport {
     pub channels: Vec<ChannelRow>,
     pub basis: BasisReport,
     pub unmix: UnmixStats,
+    /// Where each channel's demultiplexing error comes from (ideal patterns only).
+    pub error_budget: Option<Vec<ErrorBudget>>,
     pub reconstruction_seconds: f64,
     pub total_seconds: f64,
 }
@@ -134,6 +137,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
             bound_ssim: m_bound.ssim_per_plane[i],
         })
         .collect();
+    let error_budget = Some(crosstalk::budget(&recon.demux, &channels, &rig.carriers)?);
     let basis = BasisReport {
         vectors: rig.basis.len(),
         train: rig.basis.fit(&materials.train)?,
@@ -149,6 +153,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         channels: channels_rows,
         basis,
         unmix,
+        error_budget,
         reconstruction_seconds: t_demux + t_unmix,
         total_seconds: t_all.elapsed().as_secs_f64(),
     };
@@ -190,6 +195,19 @@ impl RunReport {
                 c.bound_psnr_db,
                 c.bound_ssim
             );
+        }
+        if let Some(b) = &self.error_budget {
+            s += "\nerror budget of demultiplexing, dB (higher = smaller leak): DC term, then each carrier term (own = mirror)\n";
+            for e in b {
+                let parts: Vec<String> = e.carrier_db.iter().map(|v| format!("{v:6.1}")).collect();
+                s += &format!(
+                    "ch{} DC {:6.1} | {} | worst: {}\n",
+                    e.channel,
+                    e.dc_db,
+                    parts.join(" "),
+                    e.worst
+                );
+            }
         }
         s += "\nforward stages: ";
         s += &self

@@ -1,6 +1,7 @@
 //! The reconstruction core, the same code on the twin and on the rig: Fourier demultiplexing
 //! and per-pixel spectral unmixing.
 
+pub mod crosstalk;
 pub mod demux;
 pub mod fft2;
 pub mod qp;
