@@ -3,5 +3,8 @@
 
 pub mod demux;
 pub mod fft2;
+pub mod gap;
+pub mod tv;
+pub mod wavelet;
 
 pub use demux::Demux;
