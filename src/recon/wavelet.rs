@@ -127,10 +127,20 @@ impl Dwt2 {
             row_buf.copy_from_slice(row);
             for i in 0..half {
                 let (mut a, mut d) = (0.0f32, 0.0f32);
-                for (n, (&l, &g)) in self.lo.iter().zip(&self.hi).enumerate() {
-                    let v = row_buf[(2 * i + n) % bw];
-                    a += l * v;
-                    d += g * v;
+                let taps = self.lo.len();
+                if 2 * i + taps <= bw {
+                    // Interior: no wrap, no modulo.
+                    let win = &row_buf[2 * i..2 * i + taps];
+                    for ((&v, &l), &g) in win.iter().zip(&self.lo).zip(&self.hi) {
+                        a += l * v;
+                        d += g * v;
+                    }
+                } else {
+                    for (n, (&l, &g)) in self.lo.iter().zip(&self.hi).enumerate() {
+                        let v = row_buf[(2 * i + n) % bw];
+                        a += l * v;
+                        d += g * v;
+                    }
                 }
                 row[i] = a;
                 row[half + i] = d;
@@ -145,10 +155,18 @@ impl Dwt2 {
         for r in 0..bh {
             let row = &mut img[r * self.w..r * self.w + bw];
             row_buf.fill(0.0);
+            let taps = self.lo.len();
             for i in 0..half {
                 let (a, d) = (row[i], row[half + i]);
-                for (n, (&l, &g)) in self.lo.iter().zip(&self.hi).enumerate() {
-                    row_buf[(2 * i + n) % bw] += l * a + g * d;
+                if 2 * i + taps <= bw {
+                    let win = &mut row_buf[2 * i..2 * i + taps];
+                    for ((o, &l), &g) in win.iter_mut().zip(&self.lo).zip(&self.hi) {
+                        *o += l * a + g * d;
+                    }
+                } else {
+                    for (n, (&l, &g)) in self.lo.iter().zip(&self.hi).enumerate() {
+                        row_buf[(2 * i + n) % bw] += l * a + g * d;
+                    }
                 }
             }
             row.copy_from_slice(row_buf);
