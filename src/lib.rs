@@ -10,5 +10,10 @@ pub mod spectral;
 
 pub use error::{Error, Result};
 pub use scene::Cube;
+pub mod forward;
+pub mod metrics;
 pub mod optics;
 pub mod recon;
+pub mod report;
+pub mod rig;
+pub mod run;

@@ -1,0 +1,139 @@
+//! Bad input gets a one-line error that names the file and the field, and a non-zero exit:
+//! never a panic, never NaN.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn tmpdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("specmux-bad-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A copy of the real spectra/ folder that a test may corrupt.
+fn spectra_copy(dir: &Path) -> PathBuf {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");
+    let dst = dir.join("spectra");
+    copy_dir(&src, &dst);
+    dst
+}
+
+fn copy_dir(src: &Path, dst: &Path) {
+    std::fs::create_dir_all(dst).unwrap();
+    for e in std::fs::read_dir(src).unwrap() {
+        let p = e.unwrap().path();
+        let to = dst.join(p.file_name().unwrap());
+        if p.is_dir() {
+            copy_dir(&p, &to)
+        } else {
+            std::fs::copy(&p, &to).unwrap();
+        }
+    }
+}
+
+/// Run `specmux simulate` on an experiment text; return (success, stderr).
+fn simulate(dir: &Path, toml: &str, spectra: Option<&Path>) -> (bool, String) {
+    let exp = dir.join("exp.toml");
+    std::fs::write(&exp, toml).unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_specmux"));
+    if let Some(s) = spectra {
+        cmd.arg("--spectra").arg(s);
+    }
+    let out = cmd
+        .arg("simulate")
+        .arg(&exp)
+        .arg("--out")
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn assert_one_line_error(ok: bool, err: &str, must_contain: &[&str]) {
+    assert!(!ok, "the command should fail");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "one line expected, got:\n{err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    for m in must_contain {
+        assert!(err.contains(m), "`{m}` missing from: {err}");
+    }
+}
+
+const SMALL: &str = "[scene]\nsize = [64, 64]\n";
+
+#[test]
+fn missing_spectrum_file() {
+    let d = tmpdir("missing");
+    let toml = format!("{SMALL}[rig.wheel]\nfilters = [\"wheel/red\", \"wheel/nope\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n");
+    let (ok, err) = simulate(&d, &toml, None);
+    assert_one_line_error(ok, &err, &["exp.toml", "rig.wheel.filters[1]", "nope.csv"]);
+}
+
+#[test]
+fn malformed_csv() {
+    let d = tmpdir("malformed");
+    let s = spectra_copy(&d);
+    let f = s.join("wheel/green.csv");
+    let text = std::fs::read_to_string(&f)
+        .unwrap()
+        .replacen("\n5", "\n5x", 1);
+    std::fs::write(&f, text).unwrap();
+    let (ok, err) = simulate(&d, SMALL, Some(&s));
+    assert_one_line_error(
+        ok,
+        &err,
+        &["green.csv:", "not a number", "rig.wheel.filters[1]"],
+    );
+}
+
+#[test]
+fn nan_in_a_curve() {
+    let d = tmpdir("nan");
+    let s = spectra_copy(&d);
+    let f = s.join("camera/mono_qe.csv");
+    let mut lines: Vec<String> = std::fs::read_to_string(&f)
+        .unwrap()
+        .lines()
+        .map(String::from)
+        .collect();
+    let last = lines.len() - 3;
+    let wl = lines[last].split(',').next().unwrap().to_string();
+    lines[last] = format!("{wl},NaN");
+    std::fs::write(&f, lines.join("\n")).unwrap();
+    let (ok, err) = simulate(&d, SMALL, Some(&s));
+    assert_one_line_error(ok, &err, &["mono_qe.csv:", "not finite", "rig.camera.qe"]);
+}
+
+#[test]
+fn negative_wavelength_step() {
+    let d = tmpdir("step");
+    let (ok, err) = simulate(&d, "[scene]\nwavelengths_nm = [400, 700, -10]\n", None);
+    assert_one_line_error(ok, &err, &["exp.toml", "scene.wavelengths_nm[2]", "-10"]);
+}
+
+#[test]
+fn exr_with_the_wrong_channel_count() {
+    let d = tmpdir("exr");
+    let cube = specmux::Cube::zeros(64, 64, 5);
+    let names: Vec<String> = (0..5)
+        .map(|k| specmux::scene::exr_io::band_name(400.0 + 10.0 * k as f64))
+        .collect();
+    specmux::scene::exr_io::write(&d.join("five.exr"), &cube, &names).unwrap();
+    let toml = format!("{SMALL}source = \"exr:five.exr\"\nquantity = \"radiance\"\n");
+    let (ok, err) = simulate(&d, &toml, None);
+    assert_one_line_error(ok, &err, &["five.exr", "5 channels", "31 bands"]);
+}
+
+#[test]
+fn unknown_key() {
+    let d = tmpdir("key");
+    let (ok, err) = simulate(&d, "[rig.wheel]\nfilterz = []\n", None);
+    assert_one_line_error(ok, &err, &["exp.toml:2", "filterz"]);
+}
