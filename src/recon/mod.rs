@@ -4,11 +4,15 @@
 pub mod crosstalk;
 pub mod demux;
 pub mod fft2;
+pub mod gap;
 pub mod qp;
+pub mod tv;
+pub mod wavelet;
 
 pub use demux::Demux;
 
 use crate::error::Result;
+use crate::recon::gap::{Gap, GapStats, Method};
 use crate::recon::qp::{UnmixStats, Unmixer};
 use crate::rig::Rig;
 use crate::scene::{Cube, Experiment};
@@ -16,6 +20,8 @@ use crate::scene::{Cube, Experiment};
 /// Demultiplexer and unmixer for one rig, built once and applied to every frame.
 pub struct Reconstructor {
     pub demux: Demux,
+    /// GAP de-aliasing on the patterns (given, else the ideal ones); None for `method = "fourier"`.
+    pub gap: Option<Gap>,
     pub unmixer: Unmixer,
 }
 
@@ -30,12 +36,48 @@ impl Reconstructor {
         // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
         let eta = exp.reconstruct.eta / rig.grid.step_nm.powi(4);
         let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
-        Ok(Reconstructor { demux, unmixer })
+        let gap = match exp.reconstruct.gap.method {
+            Method::Fourier => None,
+            _ => {
+                let ideal;
+                let s = match patterns {
+                    Some(p) => p,
+                    None => {
+                        let data = rig
+                            .carriers
+                            .iter()
+                            .flat_map(|c| c.ideal_pattern(rig.width, rig.height))
+                            .collect();
+                        ideal = Cube::from_vec(rig.width, rig.height, rig.carriers.len(), data)?;
+                        &ideal
+                    }
+                };
+                Some(Gap::new(s, &exp.reconstruct.gap, &exp.file)?)
+            }
+        };
+        Ok(Reconstructor {
+            demux,
+            gap,
+            unmixer,
+        })
     }
 
     /// x̂: one plane per wheel channel.
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
         self.demux.run(frame)
+    }
+
+    /// GAP de-aliasing of x̂ (x̂ itself for `fourier`); with `truth`, PSNR per iteration.
+    pub fn dealias(
+        &self,
+        frame: &Cube,
+        xhat: &Cube,
+        truth: Option<&Cube>,
+    ) -> Result<(Cube, GapStats)> {
+        match &self.gap {
+            Some(g) => g.run(frame, xhat, truth),
+            None => Ok((xhat.clone(), GapStats::default())),
+        }
     }
 
     /// r̂ = B α per pixel, non-negative.

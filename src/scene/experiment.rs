@@ -131,6 +131,8 @@ pub struct ReconstructConfig {
     pub eta: f64,
     /// Number of basis vectors J (the paper's 6).
     pub basis: usize,
+    /// GAP de-aliasing of the Fourier estimates (`[reconstruct.gap]`; docs/gap.md).
+    pub gap: crate::recon::gap::GapConfig,
 }
 
 impl Default for ReconstructConfig {
@@ -140,6 +142,7 @@ impl Default for ReconstructConfig {
             window: WindowShape::Square,
             eta: 200.0,
             basis: 6,
+            gap: Default::default(),
         }
     }
 }
@@ -310,6 +313,7 @@ impl Experiment {
                 &format!("must be 1 to the number of filters ({n})"),
             ));
         }
+        r.gap.validate(f)?;
         carriers::check_layout(&self.carriers(), r.crop, s.size[0], s.size[1], f)
     }
 }
