@@ -297,10 +297,16 @@ impl Unmixer {
         let mut degenerate_run = 0;
         for iter in 1..=MAX_ITERATIONS {
             info.iterations = iter;
-            self.equality_qp(&w[..nw], &g, &mut aw, &mut lam)?;
-            self.spectrum(&aw[..n], &mut rw);
-            for &k in &w[..nw] {
-                rw[k] = 0.0;
+            if nw == 0 {
+                // The empty working set's minimiser is the unconstrained one, already known.
+                aw[..n].copy_from_slice(&au[..n]);
+                rw[..m].copy_from_slice(&ru[..m]);
+            } else {
+                self.equality_qp(&w[..nw], &g, &mut aw, &mut lam)?;
+                self.spectrum(&aw[..n], &mut rw);
+                for &k in &w[..nw] {
+                    rw[k] = 0.0;
+                }
             }
             // Ratio test along r → r_W (band values normalised by ‖b_k‖); ties at a degenerate
             // vertex go to the band that falls fastest, or to the smallest index under Bland's rule.
