@@ -4,6 +4,9 @@
 //! One peak serves every figure: the truth's maximum over the whole cube, so that the planes of a
 //! cube share one dynamic range (a dim band is not flattered by its own small maximum).
 
+// `!(x > 0.0)` is deliberate: it is true for NaN too.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 use crate::error::{Error, Result};
 use crate::scene::Cube;
 use rayon::prelude::*;
