@@ -7,6 +7,9 @@
 //! that map gives a negative band go through an exact primal active-set method. D₂ is taken in
 //! band-index units, so η carries the grid spacing (η_nm = η · Δλ⁴).
 
+// `!(x > y)` is deliberate: it is true for NaN too. The small dense kernels index by position.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 use crate::error::{Error, Result};
 use crate::scene::Cube;
 use nalgebra::DMatrix;
@@ -297,10 +300,16 @@ impl Unmixer {
         let mut degenerate_run = 0;
         for iter in 1..=MAX_ITERATIONS {
             info.iterations = iter;
-            self.equality_qp(&w[..nw], &g, &mut aw, &mut lam)?;
-            self.spectrum(&aw[..n], &mut rw);
-            for &k in &w[..nw] {
-                rw[k] = 0.0;
+            if nw == 0 {
+                // The empty working set's minimiser is the unconstrained one, already known.
+                aw[..n].copy_from_slice(&au[..n]);
+                rw[..m].copy_from_slice(&ru[..m]);
+            } else {
+                self.equality_qp(&w[..nw], &g, &mut aw, &mut lam)?;
+                self.spectrum(&aw[..n], &mut rw);
+                for &k in &w[..nw] {
+                    rw[k] = 0.0;
+                }
             }
             // Ratio test along r → r_W (band values normalised by ‖b_k‖); ties at a degenerate
             // vertex go to the band that falls fastest, or to the smallest index under Bland's rule.
@@ -631,6 +640,7 @@ fn cholesky_solve(
 
 /// True when every value is finite, by a lane-wise sum of `v − v` (0 for finite values, NaN
 /// otherwise) that the compiler can vectorise.
+#[allow(clippy::eq_op)]
 fn all_finite(x: &[f32]) -> bool {
     let mut lanes = [0.0f32; 8];
     let chunks = x.chunks_exact(8);
