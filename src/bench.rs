@@ -130,6 +130,8 @@ pub struct BenchRow {
     pub seconds: f64,
     /// Every repeat's wall time, in run order.
     pub seconds_all: Vec<f64>,
+    /// Median wall time of each stage alone: demultiplex, de-alias, unmix.
+    pub stage_seconds: [f64; 3],
     /// On the Pareto front of (seconds, psnr_db).
     pub pareto: bool,
 }
@@ -201,19 +203,26 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
         .map(|s| reconstructor(sim, s))
         .collect::<Result<Vec<_>>>()?;
     let mut times = vec![Vec::with_capacity(repeats); grid.len()];
+    let mut stages = vec![[(); 3].map(|_| Vec::with_capacity(repeats)); grid.len()];
     let mut outputs: Vec<Option<(Cube, Cube)>> = vec![None; grid.len()];
     for _ in 0..repeats {
         for (k, r) in recons.iter().enumerate() {
             let t = Instant::now();
             let xhat = r.demultiplex(&sim.frame)?;
+            let t1 = t.elapsed().as_secs_f64();
             let (x, _) = r.dealias(&sim.frame, &xhat, None)?;
+            let t2 = t.elapsed().as_secs_f64();
             let (cube, _) = r.unmix(&x)?;
-            times[k].push(t.elapsed().as_secs_f64());
+            let t3 = t.elapsed().as_secs_f64();
+            times[k].push(t3);
+            for (v, d) in stages[k].iter_mut().zip([t1, t2 - t1, t3 - t2]) {
+                v.push(d);
+            }
             outputs[k].get_or_insert((x, cube));
         }
     }
     let mut rows = Vec::with_capacity(grid.len());
-    for ((s, t), out) in grid.iter().zip(times).zip(outputs) {
+    for (((s, t), st), out) in grid.iter().zip(times).zip(stages).zip(outputs) {
         let (x, cube) = out.expect("repeats ≥ 1 ran every setting");
         let m = metrics::compare(&sim.truth, &cube)?;
         let mx = metrics::compare(&sim.channels, &x)?;
@@ -226,6 +235,7 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
             x_psnr_db: mx.psnr_db,
             seconds: median(&t),
             seconds_all: t,
+            stage_seconds: st.map(|v| median(&v)),
             pareto: false,
         });
     }
@@ -239,17 +249,20 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
 /// The work–precision table as Markdown (also readable as text).
 pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(
-        "| setting | r̂ PSNR dB | SSIM | SAM ° | x PSNR dB | median s | Pareto |\n| --- | --- | --- | --- | --- | --- | --- |\n",
+        "| setting | r̂ PSNR dB | SSIM | SAM ° | x PSNR dB | median s | demux / de-alias / unmix s | Pareto |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for r in rows {
         s += &format!(
-            "| {} | {:.2} | {:.4} | {:.2} | {:.2} | {:.4} | {} |\n",
+            "| {} | {:.2} | {:.4} | {:.2} | {:.2} | {:.4} | {:.3} / {:.3} / {:.3} | {} |\n",
             r.label,
             r.psnr_db,
             r.ssim,
             r.sam_deg,
             r.x_psnr_db,
             r.seconds,
+            r.stage_seconds[0],
+            r.stage_seconds[1],
+            r.stage_seconds[2],
             if r.pareto { "●" } else { "" }
         );
     }
@@ -291,6 +304,8 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
             .map_err(|e| err(e.to_string()))?;
         chart
             .configure_mesh()
+            .x_labels(12)
+            .x_label_formatter(&|v| format!("{v:.3}"))
             .x_desc("median wall time of demultiplex + de-alias + unmix, s (log)")
             .y_desc("final cube PSNR, dB")
             .draw()
