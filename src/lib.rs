@@ -4,6 +4,7 @@
 //! rig's optics, the sensor, the reconstruction core, metrics and reports.
 
 pub mod atomic;
+pub mod bench;
 pub mod error;
 pub mod forward;
 pub mod metrics;

@@ -121,7 +121,7 @@ impl Colorimetry {
 }
 
 /// Register the embedded font for plot text (plotters has no system fonts here).
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         let _ = plotters::style::register_font(

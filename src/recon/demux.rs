@@ -5,6 +5,7 @@
 use super::fft2::{Fft2, HalfSpectrum};
 use crate::error::{Error, Result};
 use crate::optics::carriers::{window_bins, Carrier};
+use crate::scene::experiment::WindowShape;
 use crate::scene::Cube;
 use rayon::prelude::*;
 use rustfft::num_complex::{Complex32, Complex64};
@@ -25,6 +26,56 @@ impl Window {
     }
 }
 
+/// Order p of the super-Gaussian window used by `reconstruct.window = "super-gaussian"`: a flat
+/// top over most of the box and a roll-off of a few bins at its edge (no source fixes it; p = 4
+/// keeps ≥ 90 % weight over the inner 70 % of each axis).
+pub const SUPER_GAUSSIAN_ORDER: f64 = 4.0;
+
+/// Weight of the bin at offset (dx, dy) from the centre of a `wx × wy` crop box (dx in
+/// [−⌊wx/2⌋, wx − ⌊wx/2⌋)), in [0, 1]; 0 outside the box.
+/// - square: 1;
+/// - circular: 1 inside the ellipse (dx/(wx/2))² + (dy/(wy/2))² ≤ 1 (a disc of diameter crop·N
+///   bins on each axis);
+/// - super-Gaussian: exp(−|dx/r0x|^(2p)) · exp(−|dy/r0y|^(2p)), r0 = ⌊w/2⌋ + ½ (the box's
+///   half-extent to the outer edge of its outermost bin, = crop·N/2 for an odd bin count), so
+///   every bin of the box tends to 1 as p → ∞: the square window.
+pub fn window_weight(
+    shape: WindowShape,
+    order: f64,
+    wx: usize,
+    wy: usize,
+    dx: i64,
+    dy: i64,
+) -> f64 {
+    let win = Window {
+        cx: 0,
+        cy: 0,
+        wx,
+        wy,
+    };
+    if !win.contains(dx, dy) {
+        return 0.0;
+    }
+    match shape {
+        WindowShape::Square => 1.0,
+        WindowShape::Circular => {
+            let (u, v) = (2.0 * dx as f64 / wx as f64, 2.0 * dy as f64 / wy as f64);
+            if u * u + v * v <= 1.0 {
+                1.0
+            } else {
+                0.0
+            }
+        }
+        WindowShape::SuperGaussian => {
+            let sg = |d: i64, w: usize| {
+                let r0 = (w / 2) as f64 + 0.5;
+                (-(d.abs() as f64 / r0).powf(2.0 * order)).exp()
+            };
+            sg(dx, wx) * sg(dy, wy)
+        }
+    }
+}
+
 /// The demultiplexer for one frame size, carrier set and crop.
 pub struct Demux {
     fft: Fft2,
@@ -32,6 +83,10 @@ pub struct Demux {
     /// Complex amplitude of the e^{+iω·p} term of each pattern (½e^{iφ} for an ideal sinusoid).
     pub gains: Vec<Complex64>,
     pub dc: Window,
+    /// The window's shape and its weights on the wx × wy box (row-major from (−⌊wx/2⌋, −⌊wy/2⌋));
+    /// None for the square window (all ones).
+    pub shape: WindowShape,
+    taper: Option<Vec<f32>>,
 }
 
 impl Demux {
@@ -61,7 +116,31 @@ impl Demux {
                 wx,
                 wy,
             },
+            shape: WindowShape::Square,
+            taper: None,
         }
+    }
+
+    /// Weigh every crop window (carriers and DC) by `shape`; `order` is the super-Gaussian's p
+    /// (ignored by the other shapes; `SUPER_GAUSSIAN_ORDER` for the config's `super-gaussian`).
+    pub fn with_window(mut self, shape: WindowShape, order: f64) -> Result<Demux> {
+        if shape == WindowShape::SuperGaussian && !(order.is_finite() && order > 0.0) {
+            return Err(Error::Numerical(format!(
+                "super-Gaussian window order {order} must be finite and > 0"
+            )));
+        }
+        let (wx, wy) = (self.dc.wx, self.dc.wy);
+        let (hx, hy) = ((wx / 2) as i64, (wy / 2) as i64);
+        self.shape = shape;
+        self.taper = (shape != WindowShape::Square).then(|| {
+            (0..wy as i64)
+                .flat_map(|j| {
+                    (0..wx as i64)
+                        .map(move |i| window_weight(shape, order, wx, wy, i - hx, j - hy) as f32)
+                })
+                .collect()
+        });
+        Ok(self)
     }
 
     /// Use the carrier amplitudes measured on the patterns as imaged (one plane per carrier):
@@ -96,18 +175,23 @@ impl Demux {
         self.fft.forward(frame)
     }
 
-    /// x̂ for window `win`: Re(IFFT(crop(Y, win) shifted to 0) / gain).
+    /// x̂ for window `win`: Re(IFFT(weight · crop(Y, win) shifted to 0) / gain), the weight being
+    /// this demultiplexer's window shape (`win` must have the size of the demultiplexer's windows).
     pub fn extract(&self, spec: &HalfSpectrum, win: &Window, gain: Complex64) -> Vec<f32> {
         let h = spec.h as i64;
         let inv_gain = Complex32::new((1.0 / gain).re as f32, (1.0 / gain).im as f32);
         // Hermitian part of the shifted window, on the half plane kx ≥ 0 that the c2r needs.
         let kx_end = (win.wx - win.wx / 2).max(win.wx / 2 + 1);
         let mut cols = vec![Complex32::default(); kx_end * spec.h];
+        let (hx, hy) = ((win.wx / 2) as i64, (win.wy / 2) as i64);
         let z = |dx: i64, dy: i64| -> Complex32 {
-            if win.contains(dx, dy) {
-                spec.at(win.cx + dx, win.cy + dy) * inv_gain
-            } else {
-                Complex32::default()
+            if !win.contains(dx, dy) {
+                return Complex32::default();
+            }
+            let v = spec.at(win.cx + dx, win.cy + dy) * inv_gain;
+            match &self.taper {
+                None => v,
+                Some(t) => v * t[((dy + hy) * win.wx as i64 + dx + hx) as usize],
             }
         };
         for dx in 0..kx_end as i64 {
@@ -218,6 +302,144 @@ mod tests {
                 .map(|(a, b)| (a - b).abs())
                 .fold(0.0, f32::max);
             assert!(err < 1e-4, "channel {i}: {err}");
+        }
+    }
+
+    /// A frame multiplexing `xs` with the default carriers at phases 0.4·i.
+    fn multiplex(xs: &[Vec<f32>], w: usize, h: usize) -> (Vec<Carrier>, Cube) {
+        let carriers: Vec<Carrier> = default_layout()
+            .into_iter()
+            .enumerate()
+            .map(|(i, c)| Carrier {
+                phase_rad: 0.4 * i as f64,
+                ..c
+            })
+            .collect();
+        let mut y = vec![0.0f32; w * h];
+        for (x, c) in xs.iter().zip(&carriers) {
+            for (yy, (xv, sv)) in y.iter_mut().zip(x.iter().zip(c.ideal_pattern(w, h))) {
+                *yy += xv * sv;
+            }
+        }
+        (carriers, Cube::from_vec(w, h, 1, y).unwrap())
+    }
+
+    fn max_diff(a: &[f32], b: &[f32]) -> f32 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f32::max)
+    }
+
+    #[test]
+    fn circular_window_recovers_channels_band_limited_inside_the_disc() {
+        // A non-square frame: the disc becomes an ellipse of crop·N bins on each axis (16 × 12).
+        let (w, h) = (64, 48);
+        let xs: Vec<Vec<f32>> = (0..6).map(|i| smooth(w, h, i as f64)).collect();
+        let (carriers, y) = multiplex(&xs, w, h);
+        let d = Demux::new(w, h, &carriers, 0.25)
+            .with_window(WindowShape::Circular, SUPER_GAUSSIAN_ORDER)
+            .unwrap();
+        let out = d.run(&y).unwrap();
+        for (i, x) in xs.iter().enumerate() {
+            let err = max_diff(out.plane(i), x);
+            assert!(err < 1e-4, "channel {i}: {err}");
+        }
+    }
+
+    #[test]
+    fn circular_window_drops_the_box_corners_that_the_square_keeps() {
+        // cos at (6, 6) cycles on 64²: inside the 16-bin box (|6| < 8) but outside its disc
+        // (6² + 6² > 8²). The DC window of the crop bound keeps it with the square, not the disc.
+        let (w, h) = (64, 64);
+        let tau = std::f64::consts::TAU;
+        let base = smooth(w, h, 0.3);
+        let corner: Vec<f32> = (0..w * h)
+            .map(|p| {
+                let (x, y) = ((p % w) as f64, (p / w) as f64);
+                (tau * 6.0 * (x + y) / 64.0).cos() as f32
+            })
+            .collect();
+        let img: Vec<f32> = base.iter().zip(&corner).map(|(a, b)| a + b).collect();
+        let c = Cube::from_vec(w, h, 1, img.clone()).unwrap();
+        let sq = Demux::new(w, h, &default_layout(), 0.25).crop_bound(&c);
+        let disc = Demux::new(w, h, &default_layout(), 0.25)
+            .with_window(WindowShape::Circular, SUPER_GAUSSIAN_ORDER)
+            .unwrap()
+            .crop_bound(&c);
+        assert!(max_diff(&sq.data, &img) < 1e-4);
+        assert!(max_diff(&disc.data, &base) < 1e-4);
+    }
+
+    #[test]
+    fn super_gaussian_of_high_order_is_the_square_window() {
+        let (w, h) = (64, 48);
+        for (wx, wy) in [(16, 12), (15, 9), (2, 3)] {
+            let (hx, hy) = ((wx / 2) as i64, (wy / 2) as i64);
+            for dy in -hy - 2..wy as i64 - hy + 2 {
+                for dx in -hx - 2..wx as i64 - hx + 2 {
+                    let sq = window_weight(WindowShape::Square, 0.0, wx, wy, dx, dy);
+                    let sg = window_weight(WindowShape::SuperGaussian, 1e4, wx, wy, dx, dy);
+                    assert!((sq - sg).abs() < 1e-9, "({dx},{dy}) in {wx}×{wy}: {sg}");
+                    // A finite order tapers the box's edge: below 1 there, 1 only at the centre.
+                    let sg4 = window_weight(WindowShape::SuperGaussian, 4.0, wx, wy, dx, dy);
+                    assert!(sg4 <= sq && (dx != 0 || dy != 0 || sg4 > 0.99));
+                }
+            }
+            if wx >= 8 {
+                let edge = window_weight(WindowShape::SuperGaussian, 4.0, wx, wy, -hx, 0);
+                assert!(edge < 0.75, "{wx}: {edge}");
+            }
+        }
+        // And the demultiplexed channels agree with the square crop's.
+        let xs: Vec<Vec<f32>> = (0..6)
+            .map(|i| {
+                (0..w * h)
+                    .map(|p| ((p * 37 + i * 11) % 23) as f32)
+                    .collect()
+            })
+            .collect();
+        let (carriers, y) = multiplex(&xs, w, h);
+        let sq = Demux::new(w, h, &carriers, 0.25).run(&y).unwrap();
+        let sg = Demux::new(w, h, &carriers, 0.25)
+            .with_window(WindowShape::SuperGaussian, 1e4)
+            .unwrap()
+            .run(&y)
+            .unwrap();
+        assert!(max_diff(&sq.data, &sg.data) < 1e-3);
+        let sg4 = Demux::new(w, h, &carriers, 0.25)
+            .with_window(WindowShape::SuperGaussian, 4.0)
+            .unwrap()
+            .run(&y)
+            .unwrap();
+        assert!(max_diff(&sq.data, &sg4.data) > 0.1);
+    }
+
+    #[test]
+    fn bad_super_gaussian_order_is_an_error() {
+        for p in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let e = Demux::new(32, 32, &default_layout(), 0.25)
+                .with_window(WindowShape::SuperGaussian, p)
+                .err()
+                .expect("refused");
+            assert!(e.to_string().contains("order"), "{e}");
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn window_weights_lie_in_zero_one_and_are_symmetric(
+            wx in 2usize..40, wy in 2usize..40, dx in -25i64..25, dy in -25i64..25,
+            order in 0.1f64..50.0, k in 0usize..3,
+        ) {
+            let shape = [WindowShape::Square, WindowShape::Circular, WindowShape::SuperGaussian][k];
+            let v = window_weight(shape, order, wx, wy, dx, dy);
+            proptest::prop_assert!((0.0..=1.0).contains(&v), "{v}");
+            // Symmetric under d → −d wherever both bins are in the box (the Hermitian part needs it).
+            let m = window_weight(shape, order, wx, wy, -dx, -dy);
+            if m > 0.0 && v > 0.0 {
+                proptest::prop_assert!((v - m).abs() < 1e-12);
+            }
         }
     }
 

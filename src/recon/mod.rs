@@ -29,7 +29,8 @@ impl Reconstructor {
     /// Build from the rig; with `patterns` (the patterns as imaged, or as calibrated on the rig)
     /// the carrier gains are measured on them instead of taken from the design.
     pub fn new(exp: &Experiment, rig: &Rig, patterns: Option<&Cube>) -> Result<Reconstructor> {
-        let mut demux = Demux::new(rig.width, rig.height, &rig.carriers, exp.reconstruct.crop);
+        let mut demux = Demux::new(rig.width, rig.height, &rig.carriers, exp.reconstruct.crop)
+            .with_window(exp.reconstruct.window, demux::SUPER_GAUSSIAN_ORDER)?;
         if let Some(p) = patterns {
             demux = demux.with_measured_gains(p)?;
         }

@@ -113,11 +113,19 @@ pub struct CarrierConfig {
     pub phases_deg: Option<Vec<f64>>,
 }
 
-/// Window shape for the Fourier crop.
+/// Window shape for the Fourier crop: how the bins of the crop·N box around a carrier are weighed
+/// before the inverse FFT (src/recon/demux.rs, docs/results.md). Every shape stays inside the box,
+/// so the layout check holds for all of them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum WindowShape {
+    /// Every bin of the box at weight 1 (the paper's crop).
     Square,
+    /// The disc (ellipse for a non-square frame) inscribed in the box: diameter crop·N bins per axis.
+    Circular,
+    /// A flat-topped taper: per axis exp(−|d/r0|^(2p)), r0 = the box's half-extent to the outer edge
+    /// of its outermost bin, p = `demux::SUPER_GAUSSIAN_ORDER` (4); tends to `Square` as p → ∞.
+    SuperGaussian,
 }
 
 /// Reconstruction settings.
