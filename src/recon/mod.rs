@@ -28,7 +28,7 @@ impl Reconstructor {
         }
         // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
         let eta = exp.reconstruct.eta / rig.grid.step_nm.powi(4);
-        let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
+        let unmixer = Unmixer::new(&rig.system_matrix(), &rig.prior(), eta)?;
         Ok(Reconstructor { demux, unmixer })
     }
 
