@@ -74,14 +74,29 @@ impl Rig {
         })
     }
 
-    /// The basis as the reconstruction uses it (bands × J): B for a reflectance scene; for a
-    /// radiance scene lit by L, diag(L(λ_b))·B — the reflectance prior lit by the scene's light,
-    /// so that r̂ = diag(L)·B·α is a radiance (docs/mitsuba.md).
+    /// For a radiance scene lit by L: L at the band centres divided by its mean over the bands
+    /// (unit mean, so that η weighs the reflectance curvature as in a reflectance scene); None
+    /// otherwise. The reconstruction solves for the reflectance-like Bα and returns diag(L̃)·Bα.
+    pub fn light_gains(&self) -> Option<Vec<f64>> {
+        let l = self
+            .grid
+            .wavelengths()
+            .into_iter()
+            .map(|w| self.radiance_light.as_ref().map(|c| c.eval(w)));
+        let l: Option<Vec<f64>> = l.collect();
+        l.map(|l| {
+            let mean = l.iter().sum::<f64>() / l.len() as f64;
+            l.iter().map(|v| v / mean).collect()
+        })
+    }
+
+    /// The basis as the cube sees it (bands × J): B for a reflectance scene; for a radiance
+    /// scene lit by L, diag(L̃)·B — the reflectance prior lit by the scene's light (docs/mitsuba.md).
     pub fn prior(&self) -> nalgebra::DMatrix<f64> {
         let mut b = self.basis.vectors.clone();
-        if let Some(l) = &self.radiance_light {
-            for (k, mut row) in b.row_iter_mut().enumerate() {
-                row *= l.eval(self.grid.wavelength(k));
+        if let Some(g) = self.light_gains() {
+            for (mut row, g) in b.row_iter_mut().zip(g) {
+                row *= g;
             }
         }
         b

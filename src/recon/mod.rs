@@ -16,6 +16,8 @@ use crate::scene::{Cube, Experiment};
 pub struct Reconstructor {
     pub demux: Demux,
     pub unmixer: Unmixer,
+    /// Per-band gains L̃ of a radiance scene's light (`Rig::light_gains`): r̂ = diag(L̃)·Bα.
+    pub light: Option<Vec<f32>>,
 }
 
 impl Reconstructor {
@@ -28,8 +30,15 @@ impl Reconstructor {
         }
         // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
         let eta = exp.reconstruct.eta / rig.grid.step_nm.powi(4);
-        let unmixer = Unmixer::new(&rig.system_matrix(), &rig.prior(), eta)?;
-        Ok(Reconstructor { demux, unmixer })
+        let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
+        let light = rig
+            .light_gains()
+            .map(|g| g.iter().map(|&v| v as f32).collect());
+        Ok(Reconstructor {
+            demux,
+            unmixer,
+            light,
+        })
     }
 
     /// x̂: one plane per wheel channel.
@@ -37,8 +46,12 @@ impl Reconstructor {
         self.demux.run(frame)
     }
 
-    /// r̂ = B α per pixel, non-negative.
+    /// r̂ = B α per pixel, non-negative (times the light gains L̃ for a lit radiance scene).
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
-        self.unmixer.unmix(xhat)
+        let (mut cube, stats) = self.unmixer.unmix(xhat)?;
+        for (plane, g) in cube.planes_mut().zip(self.light.iter().flatten()) {
+            plane.iter_mut().for_each(|v| *v *= g);
+        }
+        Ok((cube, stats))
     }
 }
