@@ -49,8 +49,8 @@ impl Rig {
         let radiance_light = match exp.scene.quantity {
             Quantity::Radiance if !exp.scene.illuminant.is_empty() => {
                 let l = named("scene.illuminant", &exp.scene.illuminant)?;
-                if let Some(wl) = grid.wavelengths().into_iter().find(|&w| !(l.eval(w) > 0.0)) {
-                    let why = format!("must be positive on every band; it is 0 at {wl} nm");
+                if let Some(wl) = grid.wavelengths().into_iter().find(|&w| l.eval(w) <= 0.0) {
+                    let why = format!("must be positive on every band; it is not at {wl} nm");
                     return Err(Error::config(&exp.file, "scene.illuminant", &l.name, &why));
                 }
                 Some(l)
@@ -78,16 +78,10 @@ impl Rig {
     /// (unit mean, so that η weighs the reflectance curvature as in a reflectance scene); None
     /// otherwise. The reconstruction solves for the reflectance-like Bα and returns diag(L̃)·Bα.
     pub fn light_gains(&self) -> Option<Vec<f64>> {
-        let l = self
-            .grid
-            .wavelengths()
-            .into_iter()
-            .map(|w| self.radiance_light.as_ref().map(|c| c.eval(w)));
-        let l: Option<Vec<f64>> = l.collect();
-        l.map(|l| {
-            let mean = l.iter().sum::<f64>() / l.len() as f64;
-            l.iter().map(|v| v / mean).collect()
-        })
+        let light = self.radiance_light.as_ref()?;
+        let l = light.sample(&self.grid);
+        let mean = l.iter().sum::<f64>() / l.len() as f64;
+        Some(l.iter().map(|v| v / mean).collect())
     }
 
     /// The basis as the cube sees it (bands × J): B for a reflectance scene; for a radiance
