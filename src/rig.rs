@@ -15,6 +15,8 @@ pub struct Rig {
     pub qe: Curve,
     /// The illuminant of a reflectance scene; None for a radiance scene.
     pub illuminant: Option<Curve>,
+    /// The light that lit a radiance scene (`scene.illuminant`, None if ""): lights the prior.
+    pub radiance_light: Option<Curve>,
     /// x = W r: cube bands → wheel channels, normalised (see `ColorWheel::projection`).
     pub projection: Projection,
     pub carriers: Vec<Carrier>,
@@ -44,6 +46,17 @@ impl Rig {
             Quantity::Reflectance => Some(named("scene.illuminant", &exp.scene.illuminant)?),
             Quantity::Radiance => None,
         };
+        let radiance_light = match exp.scene.quantity {
+            Quantity::Radiance if !exp.scene.illuminant.is_empty() => {
+                let l = named("scene.illuminant", &exp.scene.illuminant)?;
+                if let Some(wl) = grid.wavelengths().into_iter().find(|&w| l.eval(w) <= 0.0) {
+                    let why = format!("must be positive on every band; it is not at {wl} nm");
+                    return Err(Error::config(&exp.file, "scene.illuminant", &l.name, &why));
+                }
+                Some(l)
+            }
+            _ => None,
+        };
         let wheel = ColorWheel { filters };
         let projection = wheel.projection(&grid, illuminant.as_ref(), &qe)?;
         let basis = Basis::train(&materials.train, &grid, exp.reconstruct.basis)?;
@@ -52,6 +65,7 @@ impl Rig {
             wheel,
             qe,
             illuminant,
+            radiance_light,
             projection,
             carriers: exp.carriers(),
             basis,
@@ -60,8 +74,31 @@ impl Rig {
         })
     }
 
-    /// F_ij = ∫ T_i L QE b_j dλ = Σ_b W_ib B_bj (exact for a basis piecewise linear on the grid).
+    /// For a radiance scene lit by L: L at the band centres divided by its mean over the bands
+    /// (unit mean, so that η weighs the reflectance curvature as in a reflectance scene); None
+    /// otherwise. The reconstruction solves for the reflectance-like Bα and returns diag(L̃)·Bα.
+    pub fn light_gains(&self) -> Option<Vec<f64>> {
+        let light = self.radiance_light.as_ref()?;
+        let l = light.sample(&self.grid);
+        let mean = l.iter().sum::<f64>() / l.len() as f64;
+        Some(l.iter().map(|v| v / mean).collect())
+    }
+
+    /// The basis as the cube sees it (bands × J): B for a reflectance scene; for a radiance
+    /// scene lit by L, diag(L̃)·B — the reflectance prior lit by the scene's light (docs/mitsuba.md).
+    pub fn prior(&self) -> nalgebra::DMatrix<f64> {
+        let mut b = self.basis.vectors.clone();
+        if let Some(g) = self.light_gains() {
+            for (mut row, g) in b.row_iter_mut().zip(g) {
+                row *= g;
+            }
+        }
+        b
+    }
+
+    /// F_ij = Σ_b W_ib P_bj with P = `prior()`: ∫ T_i L QE b_j dλ, exact for a basis piecewise
+    /// linear on the grid.
     pub fn system_matrix(&self) -> nalgebra::DMatrix<f64> {
-        &self.projection.w * &self.basis.vectors
+        &self.projection.w * self.prior()
     }
 }

@@ -23,6 +23,8 @@ pub struct Reconstructor {
     /// GAP de-aliasing on the patterns (given, else the ideal ones); None for `method = "fourier"`.
     pub gap: Option<Gap>,
     pub unmixer: Unmixer,
+    /// Per-band gains L̃ of a radiance scene's light (`Rig::light_gains`): r̂ = diag(L̃)·Bα.
+    pub light: Option<Vec<f32>>,
 }
 
 impl Reconstructor {
@@ -56,10 +58,14 @@ impl Reconstructor {
                 Some(Gap::new(s, &exp.reconstruct.gap, &exp.file)?)
             }
         };
+        let light = rig
+            .light_gains()
+            .map(|g| g.iter().map(|&v| v as f32).collect());
         Ok(Reconstructor {
             demux,
             gap,
             unmixer,
+            light,
         })
     }
 
@@ -81,8 +87,12 @@ impl Reconstructor {
         }
     }
 
-    /// r̂ = B α per pixel, non-negative.
+    /// r̂ = B α per pixel, non-negative (times the light gains L̃ for a lit radiance scene).
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
-        self.unmixer.unmix(xhat)
+        let (mut cube, stats) = self.unmixer.unmix(xhat)?;
+        for (plane, g) in cube.planes_mut().zip(self.light.iter().flatten()) {
+            plane.iter_mut().for_each(|v| *v *= g);
+        }
+        Ok((cube, stats))
     }
 }

@@ -22,11 +22,13 @@ pub struct Experiment {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneConfig {
-    /// `dead-leaves`, `shaded-objects`, or `exr:<path>` (a reflectance or radiance cube).
+    /// `dead-leaves`, `shaded-objects`, `exr:<path>` (a reflectance or radiance cube), or
+    /// `mitsuba:<prefix>` (a Mitsuba render `<prefix>_truth.exr`, radiance; scene/mitsuba.rs).
     pub source: String,
     /// Width and height in pixels (procedural scenes; the prototype's 768 × 768).
     pub size: [usize; 2],
-    /// Illuminant curve under spectra/ for a reflectance scene.
+    /// Illuminant curve under spectra/ for a reflectance scene; for a radiance scene the light
+    /// that lit it (the basis is lit by it, rig.rs), `""` for none.
     pub illuminant: String,
     /// `reflectance` (lit by `illuminant`) or `radiance` (used as it is).
     pub quantity: Quantity,
@@ -225,14 +227,16 @@ impl Experiment {
         let f = self.file.as_str();
         let s = &self.scene;
         let known = ["dead-leaves", "shaded-objects"];
-        if !known.contains(&s.source.as_str()) && !s.source.starts_with("exr:") {
+        let prefixed = ["exr:", super::mitsuba::PREFIX].map(|p| s.source.starts_with(p));
+        if !known.contains(&s.source.as_str()) && !prefixed.contains(&true) {
             return Err(Error::config(
                 f,
                 "scene.source",
                 format!("\"{}\"", s.source),
-                "expected \"dead-leaves\", \"shaded-objects\" or \"exr:<path>\"",
+                "expected \"dead-leaves\", \"shaded-objects\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
             ));
         }
+        super::mitsuba::check(s, f)?;
         for (k, &n) in s.size.iter().enumerate() {
             if !(16..=8192).contains(&n) {
                 return Err(Error::config(

@@ -4,6 +4,7 @@ pub mod cube;
 pub mod dead_leaves;
 pub mod experiment;
 pub mod exr_io;
+pub mod mitsuba;
 pub mod shaded;
 
 pub use cube::Cube;
@@ -94,6 +95,7 @@ pub fn build(exp: &Experiment, materials: &Materials) -> Result<Scene> {
                 w1 * refl(m1, b) + w2 * refl(m2, b)
             })
         }
+        s if s.starts_with(mitsuba::PREFIX) => return mitsuba::scene(exp, &grid),
         _ => return exr_scene(exp, &grid),
     };
     Ok(Scene {
