@@ -6,6 +6,7 @@
 pub mod atomic;
 pub mod error;
 pub mod scene;
+pub mod sensor;
 pub mod spectral;
 
 pub use error::{Error, Result};
