@@ -22,7 +22,7 @@ pub fn calibrate(raw: &Cube, dark: &Cube, flat: &Cube) -> Result<Cube> {
     let mut out = Cube::zeros(raw.width, raw.height, raw.planes);
     for k in 0..raw.planes {
         let (r, d, f) = (raw.plane(k), dark.plane(k), flat.plane(k));
-        if let Some(i) = (0..n).find(|&i| !(f[i] > d[i])) {
+        if let Some(i) = (0..n).find(|&i| f[i] <= d[i]) {
             return Err(Error::Numerical(format!(
                 "calibrate: flat − dark = {} DN at pixel ({}, {}) of plane {k}; the flat must be \
                  brighter than the dark frame at every pixel (take the flat with more light)",

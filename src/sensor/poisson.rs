@@ -70,7 +70,6 @@ fn knuth<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
 fn ptrs<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
     let b = 0.931 + 2.53 * lambda.sqrt();
     let a = -0.059 + 0.02483 * b;
-    let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
     let v_r = 0.9277 - 3.6224 / (b - 2.0);
     loop {
         let u = rng.gen::<f64>() - 0.5;
@@ -83,6 +82,8 @@ fn ptrs<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
         if k < 0.0 || (us < 0.013 && v > us) {
             continue;
         }
+        // Only the draws outside the squeeze (about 1 in 10) need α and the logarithms.
+        let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
         let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
         if lhs <= -lambda + k * lambda.ln() - ln_factorial(k) {
             return k;

@@ -184,7 +184,7 @@ pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {
     let sxx: f64 = fit.iter().map(|f| (f.0 - x_mean).powi(2)).sum();
     let sxy: f64 = fit.iter().map(|f| (f.0 - x_mean) * (f.1 - y_mean)).sum();
     let k = sxy / sxx;
-    if !(k > 0.0) {
+    if !(k.is_finite() && k > 0.0) {
         return Err(Error::Numerical(format!(
             "photon transfer: fitted gain K = {k} DN/e⁻ is not positive"
         )));

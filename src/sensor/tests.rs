@@ -421,8 +421,9 @@ fn calibration_removes_the_fixed_patterns() {
 /// - full well: the EMVA saturation capacity is the mean at the variance maximum, which comes
 ///   when the upper tail of the per-pixel signals (spread σ_s = √(μ_e.sat + (PRNU·μ_e.sat)² +
 ///   σ_r² + DSNU²), temporal and fixed together) reaches the clip: for Gaussian tails the loss
-///   of variance overtakes the linear rise between 2 and 3 σ_s below it; the bound is 4 σ_s
-///   below the full well and one level step above.
+///   of variance overtakes the linear rise between 2 and 3 σ_s below it (2.7 σ_s = 530 e⁻ for
+///   these defaults, from the variance of the clipped Gaussian averaged over the maps); the
+///   bound is 4 σ_s below the full well and one level step above.
 #[test]
 fn photon_transfer_recovers_the_camera() {
     let cfg = SensorConfig::default();
