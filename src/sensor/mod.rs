@@ -211,11 +211,10 @@ impl Sensor {
                 frame.width, frame.height, frame.planes, self.width, self.height
             )));
         }
-        if let Some(i) = frame
-            .data
-            .iter()
-            .position(|v| !(*v >= 0.0 && v.is_finite()))
-        {
+        // A branch-free pass first (it vectorises); the position only when something is wrong.
+        let ok = |v: &f32| *v >= 0.0 && *v <= f32::MAX;
+        if !frame.data.iter().fold(true, |all, v| all & ok(v)) {
+            let i = frame.data.iter().position(|v| !ok(v)).unwrap_or(0);
             return Err(Error::Numerical(format!(
                 "{what}: value {} at pixel ({}, {}); it must be finite and ≥ 0",
                 frame.data[i],
@@ -264,8 +263,10 @@ impl Sensor {
             if let Some(d) = dsnu {
                 e += d[x] as f64;
             }
+            // The ADC: clip to the rails, then round half up (the rails are integers, so the
+            // order does not matter; fast_floor avoids a libm call per pixel).
             let dn = c.gain_dn_per_e * e.min(c.full_well_e) + c.black_offset_dn;
-            *dst = dn.round().clamp(0.0, max_dn) as f32;
+            *dst = poisson::fast_floor(dn.clamp(0.0, max_dn) + 0.5) as f32;
         }
     }
 }

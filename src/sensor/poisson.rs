@@ -9,39 +9,40 @@ use rand::Rng;
 /// Below this mean Knuth's method (expected λ + 1 uniforms) is used, above it PTRS.
 const PTRS_MIN_MEAN: f64 = 10.0;
 
-/// ln k! for k < 16 by direct summation; larger k use the Stirling series.
-const LN_FACTORIAL: [f64; 16] = {
-    // ln k! as exact-to-double constants (ln 0! = ln 1! = 0).
-    [
-        0.0,
-        0.0,
-        std::f64::consts::LN_2,
-        1.791_759_469_228_055,
-        3.178_053_830_347_945_8,
-        4.787_491_742_782_046,
-        6.579_251_212_010_101,
-        8.525_161_361_065_415,
-        10.604_602_902_745_25,
-        12.801_827_480_081_469,
-        15.104_412_573_075_516,
-        17.502_307_845_873_887,
-        19.987_214_495_661_885,
-        22.552_163_853_123_42,
-        25.191_221_182_738_68,
-        27.899_271_383_840_894,
-    ]
-};
+/// Size of the ln k! table (counts up to 4× the default full well).
+const LN_FACTORIAL_TABLE: usize = 1 << 16;
 
-/// ln k!: a table below 16, Stirling's series with terms to k⁻⁵ above (absolute error < 1e-13).
+/// ln k! by summation for k < 65536 (built once, 512 KiB), Stirling's series with terms to k⁻⁵
+/// above (absolute error < 1e-13 there).
 fn ln_factorial(k: f64) -> f64 {
-    if k < LN_FACTORIAL.len() as f64 {
-        return LN_FACTORIAL[k as usize];
+    use std::sync::OnceLock;
+    static TABLE: OnceLock<Vec<f64>> = OnceLock::new();
+    if k < LN_FACTORIAL_TABLE as f64 {
+        let table = TABLE.get_or_init(|| {
+            let mut t = vec![0.0; LN_FACTORIAL_TABLE];
+            for i in 2..LN_FACTORIAL_TABLE {
+                t[i] = t[i - 1] + (i as f64).ln();
+            }
+            t
+        });
+        return table[k as usize];
     }
     let r = 1.0 / k;
     let r2 = r * r;
     (k + 0.5) * k.ln() - k
         + 0.5 * (2.0 * std::f64::consts::PI).ln()
         + r * (1.0 / 12.0 - r2 * (1.0 / 360.0 - r2 / 1260.0))
+}
+
+/// floor(x) without a libm call on the baseline x86-64 target: truncation is floor for
+/// 0 ≤ x < 2^52; other values (rare: they are rejected) take the library floor.
+#[inline]
+pub(crate) fn fast_floor(x: f64) -> f64 {
+    if (0.0..4.5e15).contains(&x) {
+        x as i64 as f64
+    } else {
+        x.floor()
+    }
 }
 
 /// One Poisson(λ) draw as f64; λ must be finite and ≥ 0 (the caller checks).
@@ -75,7 +76,7 @@ fn ptrs<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
         let u = rng.gen::<f64>() - 0.5;
         let v: f64 = rng.gen();
         let us = 0.5 - u.abs();
-        let k = ((2.0 * a / us + b) * u + lambda + 0.43).floor();
+        let k = fast_floor((2.0 * a / us + b) * u + lambda + 0.43);
         if us >= 0.07 && v <= v_r {
             return k;
         }
@@ -159,6 +160,24 @@ mod tests {
                 chi2 < limit,
                 "λ={lambda}: χ²={chi2:.1} with {dof} dof (limit {limit:.1})"
             );
+        }
+    }
+
+    #[test]
+    fn fast_floor_is_floor() {
+        for x in [
+            0.0,
+            0.3,
+            1.0,
+            2.999,
+            12345.5,
+            -0.2,
+            -3.0,
+            -7.5,
+            1e17,
+            f64::NEG_INFINITY,
+        ] {
+            assert_eq!(fast_floor(x), x.floor(), "{x}");
         }
     }
 
