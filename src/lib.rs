@@ -14,6 +14,7 @@ pub mod report;
 pub mod rig;
 pub mod run;
 pub mod scene;
+pub mod sensor;
 pub mod spectral;
 
 pub use error::{Error, Result};
