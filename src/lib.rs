@@ -7,6 +7,7 @@ pub mod atomic;
 pub mod error;
 pub mod scene;
 pub mod spectral;
+pub mod timing;
 
 pub use error::{Error, Result};
 pub use scene::Cube;
