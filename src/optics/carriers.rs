@@ -77,7 +77,10 @@ pub fn check_layout(
     height: usize,
     file: &str,
 ) -> Result<()> {
-    let (wx, wy) = (window_bins(crop, width) as i64, window_bins(crop, height) as i64);
+    let (wx, wy) = (
+        window_bins(crop, width) as i64,
+        window_bins(crop, height) as i64,
+    );
     if wx < 2 || wy < 2 {
         return Err(Error::config(
             file,
@@ -138,8 +141,8 @@ mod tests {
         let p = c.ideal_pattern(7, 5);
         for y in 0..5 {
             for x in 0..7 {
-                let want = 1.0
-                    + (std::f64::consts::TAU * (0.1 * x as f64 - 0.2 * y as f64) + 0.3).cos();
+                let want =
+                    1.0 + (std::f64::consts::TAU * (0.1 * x as f64 - 0.2 * y as f64) + 0.3).cos();
                 assert!((p[y * 7 + x] as f64 - want).abs() < 1e-6);
             }
         }
@@ -149,7 +152,9 @@ mod tests {
     fn out_of_band_carrier_is_refused_with_its_index() {
         let mut l = default_layout();
         l[3].fx = 0.7;
-        let e = check_layout(&l, 0.25, 768, 768, "x.toml").unwrap_err().to_string();
+        let e = check_layout(&l, 0.25, 768, 768, "x.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("frequencies[3]"), "{e}");
     }
 }

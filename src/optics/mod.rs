@@ -2,6 +2,7 @@
 //! 4f Fourier filter, lens PSF).
 
 pub mod carriers;
+pub mod dither;
 pub mod wheel;
 
 pub use carriers::Carrier;

@@ -36,8 +36,15 @@ impl ColorWheel {
             }
         }
         let brightest = w.row_iter().map(|r| r.sum()).fold(0.0, f64::max);
-        let scale = if brightest > 0.0 { 1.0 / brightest } else { 1.0 };
-        Ok(Projection { w: w * scale, scale })
+        let scale = if brightest > 0.0 {
+            1.0 / brightest
+        } else {
+            1.0
+        };
+        Ok(Projection {
+            w: w * scale,
+            scale,
+        })
     }
 }
 
@@ -50,9 +57,16 @@ mod tests {
         // A white reflector (r = 1 on every band) under a flat light with flat QE gives
         // x_i ∝ ∫_400^700 T_i dλ; a box filter 500–600 nm has integral 100 nm.
         let g = Grid::VISIBLE;
-        let boxf = Curve::new("box", vec![500.0, 500.0001, 600.0, 600.0001], vec![0.0, 1.0, 1.0, 0.0]).unwrap();
+        let boxf = Curve::new(
+            "box",
+            vec![500.0, 500.0001, 600.0, 600.0001],
+            vec![0.0, 1.0, 1.0, 0.0],
+        )
+        .unwrap();
         let half = boxf.scaled(0.5);
-        let wheel = ColorWheel { filters: vec![boxf, half] };
+        let wheel = ColorWheel {
+            filters: vec![boxf, half],
+        };
         let flat = Curve::constant("flat", 300.0, 900.0, 1.0).unwrap();
         let p = wheel.projection(&g, Some(&flat), &flat).unwrap();
         let white: Vec<f64> = (0..2).map(|i| p.w.row(i).sum()).collect();

@@ -54,7 +54,12 @@ impl Demux {
             fft: Fft2::new(w, h),
             windows,
             gains,
-            dc: Window { cx: 0, cy: 0, wx, wy },
+            dc: Window {
+                cx: 0,
+                cy: 0,
+                wx,
+                wy,
+            },
         }
     }
 
@@ -64,7 +69,12 @@ impl Demux {
         if patterns.planes != self.windows.len() || patterns.pixels() != self.fft.w * self.fft.h {
             return Err(Error::Shape(format!(
                 "patterns {}×{}×{} for {} carriers on {}×{}",
-                patterns.width, patterns.height, patterns.planes, self.windows.len(), self.fft.w, self.fft.h
+                patterns.width,
+                patterns.height,
+                patterns.planes,
+                self.windows.len(),
+                self.fft.w,
+                self.fft.h
             )));
         }
         for (i, win) in self.windows.iter().enumerate() {
@@ -120,12 +130,15 @@ impl Demux {
             )));
         }
         if !frame.all_finite() {
-            return Err(Error::Numerical("the frame contains NaN or infinite values".into()));
+            return Err(Error::Numerical(
+                "the frame contains NaN or infinite values".into(),
+            ));
         }
         let spec = self.spectrum(&frame.data);
         let mut out = Cube::zeros(frame.width, frame.height, self.windows.len());
         for (i, (win, g)) in self.windows.iter().zip(&self.gains).enumerate() {
-            out.plane_mut(i).copy_from_slice(&self.extract(&spec, win, *g));
+            out.plane_mut(i)
+                .copy_from_slice(&self.extract(&spec, win, *g));
         }
         Ok(out)
     }
@@ -169,7 +182,8 @@ mod tests {
         (0..w * h)
             .map(|p| {
                 let (x, y) = ((p % w) as f64 / w as f64, (p / w) as f64 / h as f64);
-                (2.0 + (tau * (2.0 * x + seed)).cos() + 0.5 * (tau * (3.0 * y - x) + seed).sin()) as f32
+                (2.0 + (tau * (2.0 * x + seed)).cos() + 0.5 * (tau * (3.0 * y - x) + seed).sin())
+                    as f32
             })
             .collect()
     }
@@ -180,7 +194,10 @@ mod tests {
         let carriers: Vec<Carrier> = default_layout()
             .into_iter()
             .enumerate()
-            .map(|(i, c)| Carrier { phase_rad: 0.4 * i as f64, ..c })
+            .map(|(i, c)| Carrier {
+                phase_rad: 0.4 * i as f64,
+                ..c
+            })
             .collect();
         let xs: Vec<Vec<f32>> = (0..6).map(|i| smooth(w, h, i as f64)).collect();
         let mut y = vec![0.0f32; w * h];
@@ -192,14 +209,23 @@ mod tests {
         let d = Demux::new(w, h, &carriers, 0.25);
         let out = d.run(&Cube::from_vec(w, h, 1, y).unwrap()).unwrap();
         for (i, x) in xs.iter().enumerate() {
-            let err = out.plane(i).iter().zip(x).map(|(a, b)| (a - b).abs()).fold(0.0, f32::max);
+            let err = out
+                .plane(i)
+                .iter()
+                .zip(x)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f32::max);
             assert!(err < 1e-4, "channel {i}: {err}");
         }
     }
 
     #[test]
     fn measured_gain_of_ideal_pattern_is_half_phasor() {
-        let c = Carrier { fx: 0.25, fy: 0.125, phase_rad: 0.7 };
+        let c = Carrier {
+            fx: 0.25,
+            fy: 0.125,
+            phase_rad: 0.7,
+        };
         let p = c.ideal_pattern(32, 32);
         let g = dft_at(&p, 32, 32, 8, 4);
         assert!((g - Complex64::from_polar(0.5, 0.7)).norm() < 1e-6);

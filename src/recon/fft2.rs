@@ -100,7 +100,11 @@ impl Fft2 {
             || (self.c2r.make_input_vec(), self.c2r.make_scratch_vec()),
             |(inp, scratch), (y, row)| {
                 for (kx, v) in inp.iter_mut().enumerate() {
-                    *v = if kx < kx_end { cols[kx * h + y] * norm } else { Complex32::default() };
+                    *v = if kx < kx_end {
+                        cols[kx * h + y] * norm
+                    } else {
+                        Complex32::default()
+                    };
                 }
                 inp[0].im = 0.0;
                 if w % 2 == 0 {
@@ -119,17 +123,19 @@ impl Fft2 {
 fn transpose(src: &[Complex32], rows: usize, cols: usize) -> Vec<Complex32> {
     const B: usize = 32;
     let mut dst = vec![Complex32::default(); rows * cols];
-    dst.par_chunks_mut(rows * B).enumerate().for_each(|(cb, block)| {
-        let c0 = cb * B;
-        let c1 = (c0 + B).min(cols);
-        for r0 in (0..rows).step_by(B) {
-            for r in r0..(r0 + B).min(rows) {
-                for c in c0..c1 {
-                    block[(c - c0) * rows + r] = src[r * cols + c];
+    dst.par_chunks_mut(rows * B)
+        .enumerate()
+        .for_each(|(cb, block)| {
+            let c0 = cb * B;
+            let c1 = (c0 + B).min(cols);
+            for r0 in (0..rows).step_by(B) {
+                for r in r0..(r0 + B).min(rows) {
+                    for c in c0..c1 {
+                        block[(c - c0) * rows + r] = src[r * cols + c];
+                    }
                 }
             }
-        }
-    });
+        });
     dst
 }
 
@@ -141,7 +147,8 @@ mod tests {
         let (mut re, mut im) = (0.0, 0.0);
         for y in 0..h {
             for x in 0..w {
-                let a = -std::f64::consts::TAU * (kx as f64 * x as f64 / w as f64 + ky as f64 * y as f64 / h as f64);
+                let a = -std::f64::consts::TAU
+                    * (kx as f64 * x as f64 / w as f64 + ky as f64 * y as f64 / h as f64);
                 re += img[y * w + x] as f64 * a.cos();
                 im += img[y * w + x] as f64 * a.sin();
             }
@@ -150,7 +157,9 @@ mod tests {
     }
 
     fn test_image(w: usize, h: usize) -> Vec<f32> {
-        (0..w * h).map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.3).collect()
+        (0..w * h)
+            .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.3)
+            .collect()
     }
 
     #[test]
@@ -162,7 +171,10 @@ mod tests {
             for kx in 0..w {
                 let (re, im) = naive_dft(&img, w, h, kx, ky);
                 let v = s.at(kx as i64, ky as i64);
-                assert!((v.re as f64 - re).abs() < 1e-4 && (v.im as f64 - im).abs() < 1e-4, "({kx},{ky})");
+                assert!(
+                    (v.re as f64 - re).abs() < 1e-4 && (v.im as f64 - im).abs() < 1e-4,
+                    "({kx},{ky})"
+                );
             }
         }
     }

@@ -139,7 +139,9 @@ mod tests {
     #[test]
     fn mix_is_matrix_product() {
         let c = Cube::from_vec(1, 1, 2, vec![1.0, 2.0]).unwrap();
-        let m = c.mix(&[vec![1.0, 1.0], vec![2.0, -1.0], vec![0.0, 3.0]]).unwrap();
+        let m = c
+            .mix(&[vec![1.0, 1.0], vec![2.0, -1.0], vec![0.0, 3.0]])
+            .unwrap();
         assert_eq!(m.data, vec![3.0, 0.0, 6.0]);
     }
 }

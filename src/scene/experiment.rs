@@ -76,9 +76,16 @@ impl Default for WheelConfig {
     fn default() -> Self {
         // Section 4 of the paper: three dichroic R/G/B segments and three broadband colour papers.
         WheelConfig {
-            filters: ["wheel/red", "wheel/green", "wheel/blue", "paper/a", "paper/b", "paper/c"]
-                .map(String::from)
-                .to_vec(),
+            filters: [
+                "wheel/red",
+                "wheel/green",
+                "wheel/blue",
+                "paper/a",
+                "paper/b",
+                "paper/c",
+            ]
+            .map(String::from)
+            .to_vec(),
         }
     }
 }
@@ -217,12 +224,22 @@ impl Experiment {
         }
         for (k, &n) in s.size.iter().enumerate() {
             if !(16..=8192).contains(&n) {
-                return Err(Error::config(f, &format!("scene.size[{k}]"), n, "must be 16 to 8192 pixels"));
+                return Err(Error::config(
+                    f,
+                    &format!("scene.size[{k}]"),
+                    n,
+                    "must be 16 to 8192 pixels",
+                ));
             }
         }
         let [lo, hi, step] = s.wavelengths_nm;
         if !(step.is_finite() && step > 0.0) {
-            return Err(Error::config(f, "scene.wavelengths_nm[2]", step, "the step must be positive"));
+            return Err(Error::config(
+                f,
+                "scene.wavelengths_nm[2]",
+                step,
+                "the step must be positive",
+            ));
         }
         if !(lo.is_finite() && lo > 0.0 && hi.is_finite() && hi > lo) {
             return Err(Error::config(
@@ -234,7 +251,12 @@ impl Experiment {
         }
         let n = self.rig.wheel.filters.len();
         if n == 0 || n > 16 {
-            return Err(Error::config(f, "rig.wheel.filters", n, "needs 1 to 16 filters"));
+            return Err(Error::config(
+                f,
+                "rig.wheel.filters",
+                n,
+                "needs 1 to 16 filters",
+            ));
         }
         if let Some(fr) = &self.rig.carriers.frequencies {
             if fr.len() != n {
@@ -255,15 +277,30 @@ impl Experiment {
         }
         if let Some(p) = &self.rig.carriers.phases_deg {
             if p.len() != n || p.iter().any(|v| !v.is_finite()) {
-                return Err(Error::config(f, "rig.carriers.phases_deg", format!("{p:?}"), "needs one finite phase per carrier"));
+                return Err(Error::config(
+                    f,
+                    "rig.carriers.phases_deg",
+                    format!("{p:?}"),
+                    "needs one finite phase per carrier",
+                ));
             }
         }
         let r = &self.reconstruct;
         if !(r.crop > 0.0 && r.crop <= 0.5) {
-            return Err(Error::config(f, "reconstruct.crop", r.crop, "must be in (0, 0.5]"));
+            return Err(Error::config(
+                f,
+                "reconstruct.crop",
+                r.crop,
+                "must be in (0, 0.5]",
+            ));
         }
         if !(r.eta.is_finite() && r.eta >= 0.0) {
-            return Err(Error::config(f, "reconstruct.eta", r.eta, "must be finite and ≥ 0"));
+            return Err(Error::config(
+                f,
+                "reconstruct.eta",
+                r.eta,
+                "must be finite and ≥ 0",
+            ));
         }
         if r.basis == 0 || r.basis > n {
             return Err(Error::config(
@@ -292,12 +329,14 @@ mod tests {
 
     #[test]
     fn unknown_keys_and_bad_values_name_the_key() {
-        let e = Experiment::from_toml("[reconstruct]\ncrop = 0.25\netaa = 3\n", "t.toml").unwrap_err();
+        let e =
+            Experiment::from_toml("[reconstruct]\ncrop = 0.25\netaa = 3\n", "t.toml").unwrap_err();
         let s = e.to_string();
         assert!(s.contains("t.toml:3") && s.contains("etaa"), "{s}");
         let e = Experiment::from_toml("[reconstruct]\neta = -1\n", "t.toml").unwrap_err();
         assert!(e.to_string().contains("reconstruct.eta"), "{e}");
-        let e = Experiment::from_toml("[scene]\nwavelengths_nm = [400, 700, -10]\n", "t.toml").unwrap_err();
+        let e = Experiment::from_toml("[scene]\nwavelengths_nm = [400, 700, -10]\n", "t.toml")
+            .unwrap_err();
         assert!(e.to_string().contains("scene.wavelengths_nm[2]"), "{e}");
         let e = Experiment::from_toml("[reconstruct]\ncrop = 0.3\n", "t.toml").unwrap_err();
         assert!(e.to_string().contains("overlap"), "{e}");

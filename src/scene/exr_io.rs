@@ -91,7 +91,10 @@ mod tests {
         for (i, v) in cube.data.iter_mut().enumerate() {
             *v = (i as f32).sqrt() * 1.000_001 - 2.5 + f32::EPSILON * i as f32;
         }
-        let names: Vec<String> = [400.0, 410.0, 420.0].iter().map(|&w| band_name(w)).collect();
+        let names: Vec<String> = [400.0, 410.0, 420.0]
+            .iter()
+            .map(|&w| band_name(w))
+            .collect();
         write(&path, &cube, &names).unwrap();
         let (back, back_names) = read(&path).unwrap();
         assert_eq!(back_names, names);

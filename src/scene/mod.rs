@@ -60,8 +60,14 @@ pub fn grid_of(exp: &Experiment) -> Result<Grid> {
             "the step must divide last − first",
         ));
     }
-    Grid::new(lo, step, count)
-        .map_err(|e| Error::config(&exp.file, "scene.wavelengths_nm", format!("[{lo}, {hi}, {step}]"), &e.to_string()))
+    Grid::new(lo, step, count).map_err(|e| {
+        Error::config(
+            &exp.file,
+            "scene.wavelengths_nm",
+            format!("[{lo}, {hi}, {step}]"),
+            &e.to_string(),
+        )
+    })
 }
 
 /// Build the experiment's scene: a procedural one from held-out materials, or an EXR cube.
@@ -104,7 +110,12 @@ fn paint(w: usize, h: usize, bands: usize, value: impl Fn(usize, usize) -> f32 +
     cube.data
         .par_chunks_mut(w * h)
         .enumerate()
-        .for_each(|(b, plane)| plane.iter_mut().enumerate().for_each(|(p, v)| *v = value(b, p)));
+        .for_each(|(b, plane)| {
+            plane
+                .iter_mut()
+                .enumerate()
+                .for_each(|(p, v)| *v = value(b, p))
+        });
     cube
 }
 

@@ -56,7 +56,12 @@ pub fn spheres(width: usize, height: usize, materials: usize, seed: u64) -> Shad
                 let shade = 0.12 + 0.88 * (dx * l[0] + dy * l[1] + nz * l[2]).max(0.0);
                 let px = &mut layers[y * width + x];
                 let (front_m, front_w) = (px.0, px.1);
-                *px = (Some(m), (cover * shade) as f32, front_m, front_w * (1.0 - cover) as f32);
+                *px = (
+                    Some(m),
+                    (cover * shade) as f32,
+                    front_m,
+                    front_w * (1.0 - cover) as f32,
+                );
             }
         }
     }

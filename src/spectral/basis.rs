@@ -68,7 +68,10 @@ impl Basis {
         let mut order: Vec<usize> = (0..grid.count).collect();
         order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
         let total: f64 = eig.eigenvalues.iter().map(|v| v.max(0.0)).sum();
-        let kept: f64 = order[..j].iter().map(|&k| eig.eigenvalues[k].max(0.0)).sum();
+        let kept: f64 = order[..j]
+            .iter()
+            .map(|&k| eig.eigenvalues[k].max(0.0))
+            .sum();
         let mut vectors = DMatrix::zeros(grid.count, j);
         for (col, &k) in order[..j].iter().enumerate() {
             let v = eig.eigenvectors.column(k);
@@ -92,8 +95,12 @@ impl Basis {
 
     /// Basis vector j as a curve on the grid.
     pub fn curve(&self, j: usize) -> Curve {
-        Curve::from_grid(format!("b{j}"), &self.grid, self.vectors.column(j).iter().cloned().collect())
-            .expect("grid curves are valid")
+        Curve::from_grid(
+            format!("b{j}"),
+            &self.grid,
+            self.vectors.column(j).iter().cloned().collect(),
+        )
+        .expect("grid curves are valid")
     }
 
     /// Least-squares projection of `spectra` onto the basis, and the error it leaves.
@@ -120,7 +127,11 @@ mod tests {
         let g = Grid::VISIBLE;
         // Spectra built from two smooth functions: a 2-vector basis must capture all energy.
         let f1: Vec<f64> = g.wavelengths().iter().map(|w| 1.0 + 0.001 * w).collect();
-        let f2: Vec<f64> = g.wavelengths().iter().map(|w| ((w - 400.0) / 50.0).sin()).collect();
+        let f2: Vec<f64> = g
+            .wavelengths()
+            .iter()
+            .map(|w| ((w - 400.0) / 50.0).sin())
+            .collect();
         let spectra: Vec<Curve> = (0..10)
             .map(|k| {
                 let (a, b) = (0.3 + 0.05 * k as f64, 0.1 * (k as f64 - 4.0));

@@ -30,7 +30,11 @@ pub fn parse(path: &Path, text: &str) -> Result<Table> {
         }
         if let Some(c) = line.strip_prefix('#') {
             if provenance.is_empty() {
-                provenance = c.trim().trim_start_matches("provenance:").trim().to_string();
+                provenance = c
+                    .trim()
+                    .trim_start_matches("provenance:")
+                    .trim()
+                    .to_string();
             }
             continue;
         }
@@ -40,7 +44,10 @@ pub fn parse(path: &Path, text: &str) -> Result<Table> {
                 if cells[0] != "wavelength_nm" {
                     return Err(err(
                         line_no,
-                        format!("header must start with `wavelength_nm`, found `{}`", cells[0]),
+                        format!(
+                            "header must start with `wavelength_nm`, found `{}`",
+                            cells[0]
+                        ),
                     ));
                 }
                 if cells.len() < 2 {
@@ -58,9 +65,9 @@ pub fn parse(path: &Path, text: &str) -> Result<Table> {
                 let mut row = Vec::with_capacity(cells.len());
                 for (c, cell) in cells.iter().enumerate() {
                     let field = if c == 0 { "wavelength_nm" } else { &h[c - 1] };
-                    let v: f64 = cell
-                        .parse()
-                        .map_err(|_| err(line_no, format!("`{field}`: `{cell}` is not a number")))?;
+                    let v: f64 = cell.parse().map_err(|_| {
+                        err(line_no, format!("`{field}`: `{cell}` is not a number"))
+                    })?;
                     if !v.is_finite() {
                         return Err(err(line_no, format!("`{field}`: {cell} is not finite")));
                     }
@@ -112,7 +119,10 @@ mod tests {
     fn malformed_rows_name_line_and_field() {
         let e = p("# provenance: x\nwavelength_nm,a\n400,0.1\n500,zz\n").unwrap_err();
         let s = e.to_string();
-        assert!(s.contains("t.csv:4") && s.contains("`a`") && s.contains("zz"), "{s}");
+        assert!(
+            s.contains("t.csv:4") && s.contains("`a`") && s.contains("zz"),
+            "{s}"
+        );
         let e = p("# provenance: x\nwavelength_nm,a\n400,NaN\n500,1\n").unwrap_err();
         assert!(e.to_string().contains("not finite"));
         let e = p("# provenance: x\nwavelength_nm,a\n500,1\n400,1\n").unwrap_err();

@@ -32,7 +32,9 @@ impl Curve {
         }
         for (k, (&w, &v)) in wl_nm.iter().zip(&value).enumerate() {
             if !(w.is_finite() && w > 0.0) {
-                return Err(err(format!("wavelength {w} at sample {k} is not a positive number")));
+                return Err(err(format!(
+                    "wavelength {w} at sample {k} is not a positive number"
+                )));
             }
             if !v.is_finite() {
                 return Err(err(format!("value {v} at {w} nm is not finite")));
@@ -118,7 +120,10 @@ impl Curve {
 
     /// Point samples at the centres of `grid`.
     pub fn sample(&self, grid: &Grid) -> Vec<f64> {
-        grid.wavelengths().into_iter().map(|w| self.eval(w)).collect()
+        grid.wavelengths()
+            .into_iter()
+            .map(|w| self.eval(w))
+            .collect()
     }
 
     /// The curve resampled onto `grid` (point sampling of the piecewise-linear curve).
@@ -190,8 +195,14 @@ pub fn integrate_product(curves: &[&Curve]) -> Result<f64> {
             curves.len()
         )));
     }
-    let lo = curves.iter().map(|c| c.support().0).fold(f64::MIN, f64::max);
-    let hi = curves.iter().map(|c| c.support().1).fold(f64::MAX, f64::min);
+    let lo = curves
+        .iter()
+        .map(|c| c.support().0)
+        .fold(f64::MIN, f64::max);
+    let hi = curves
+        .iter()
+        .map(|c| c.support().1)
+        .fold(f64::MAX, f64::min);
     if lo >= hi {
         return Ok(0.0);
     }
@@ -226,7 +237,10 @@ mod tests {
         // A long-pass filter with a 10 nm linear edge 500→510 nm, sampled every `step` nm.
         let n = ((800.0 - 380.0) / step) as usize + 1;
         let wl: Vec<f64> = (0..n).map(|k| 380.0 + step * k as f64).collect();
-        let v = wl.iter().map(|&w| ((w - 500.0) / 10.0).clamp(0.0, 1.0) * 0.9).collect();
+        let v = wl
+            .iter()
+            .map(|&w| ((w - 500.0) / 10.0).clamp(0.0, 1.0) * 0.9)
+            .collect();
         Curve::new("edge", wl, v).unwrap()
     }
 

@@ -23,7 +23,11 @@ impl Grid {
     pub fn new(start_nm: f64, step_nm: f64, count: usize) -> Result<Grid> {
         let bad = |key: &str, v: String, why: &str| Error::config("grid", key, v, why);
         if !(start_nm.is_finite() && start_nm > 0.0) {
-            return Err(bad("start_nm", start_nm.to_string(), "must be a positive wavelength"));
+            return Err(bad(
+                "start_nm",
+                start_nm.to_string(),
+                "must be a positive wavelength",
+            ));
         }
         if !(step_nm.is_finite() && step_nm > 0.0) {
             return Err(bad("step_nm", step_nm.to_string(), "must be positive"));

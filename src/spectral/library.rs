@@ -68,7 +68,11 @@ impl Library {
             let stem = f.file_stem().unwrap().to_string_lossy().to_string();
             for c in csv::read(&f)?.curves {
                 let name = format!("{dir}/{stem}/{}", c.name);
-                out.push(Curve::new(name, c.wavelengths().to_vec(), c.values().to_vec())?);
+                out.push(Curve::new(
+                    name,
+                    c.wavelengths().to_vec(),
+                    c.values().to_vec(),
+                )?);
             }
         }
         if out.is_empty() {
