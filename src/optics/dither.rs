@@ -210,7 +210,7 @@ fn band_pass(fft: &Fft2, img: &[f32], passband: Passband) -> (Vec<f32>, f64) {
 
 /// Bin index in −n/2..n/2 for a stored index 0..n.
 pub(crate) fn signed_bin(k: usize, n: usize) -> i64 {
-    if 2 * k >= n + 1 {
+    if 2 * k > n {
         k as i64 - n as i64
     } else {
         k as i64

@@ -144,6 +144,17 @@ impl Mask {
         }
     }
 
+    /// Transmittance seen by a bin of the mirror grid, which stands for f and its replicas f + n.
+    pub fn at_periodic(&self, fx: f64, fy: f64) -> f64 {
+        let mut v = 0.0f64;
+        for nx in -1..=1 {
+            for ny in -1..=1 {
+                v = v.max(self.at(fx + nx as f64, fy + ny as f64));
+            }
+        }
+        v
+    }
+
     /// Largest |fx| and |fy| any opening reaches.
     pub fn extent(&self) -> (f64, f64) {
         self.centres.iter().fold((0.0, 0.0), |(x, y), &(cx, cy)| {

@@ -280,16 +280,7 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
         .collect();
     let mask = cfg.fourier_filter.as_ref().map(|f| f.mask(pitch, fxd, fyd));
     // On the mirror grid a bin stands for f and its replicas f + n.
-    let passband = |fx: f64, fy: f64| -> f64 {
-        let Some(mk) = &mask else { return 1.0 };
-        let mut v = 0.0f64;
-        for nx in -1..=1 {
-            for ny in -1..=1 {
-                v = v.max(mk.at(fx + nx as f64, fy + ny as f64));
-            }
-        }
-        v
-    };
+    let passband = |fx: f64, fy: f64| mask.as_ref().map_or(1.0, |mk| mk.at_periodic(fx, fy));
     let display = match &cfg.dmd {
         Some(d) => d.display(&target, &passband),
         None => target.clone(),
@@ -310,18 +301,13 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
             };
             let os = (4.0 * reach).floor() + 1.0;
             let side = pad * os * wd.max(hd) as f64;
-            if !(side <= MAX_GRID as f64) {
-                let key = if pad > 1.0 {
-                    "rig.fourier_filter.pinhole_radius_um"
-                } else {
-                    "rig.fourier_filter.pinhole_radius_um (openings reach too far)"
-                };
+            if !side.is_finite() || side > MAX_GRID as f64 {
                 return Err(Error::config(
                     "optics",
-                    key,
+                    "rig.fourier_filter.pinhole_radius_um",
                     cfg.fourier_filter.as_ref().map_or(0.0, |f| f.pinhole_radius_um),
                     &format!(
-                        "an opening of {:.2} frequency bins (reaching {reach:.3} cycles/mirror) needs a {}-fold padded, {}-fold oversampled grid of {side} > {MAX_GRID} samples; widen the pinhole or shrink the DMD area",
+                        "an opening of {:.2} frequency bins (reaching {reach:.3} cycles/mirror) needs a {}-fold padded, {}-fold oversampled grid of {side} > {MAX_GRID} samples; an opening must span at least 4 bins (widen it or use fewer mirrors) and reach well below 2 cycles/mirror",
                         bins, pad, os
                     ),
                 ));

@@ -117,15 +117,7 @@ pub fn pattern_report(
                 set.targets.plane(i),
                 d.width,
                 d.height,
-                &|fx, fy| {
-                    let mut v = 0.0f64;
-                    for nx in -1..=1 {
-                        for ny in -1..=1 {
-                            v = v.max(mk.at(fx + nx as f64, fy + ny as f64));
-                        }
-                    }
-                    v
-                },
+                &|fx, fy| mk.at_periodic(fx, fy),
             )),
             _ => None,
         };
