@@ -1,7 +1,13 @@
-//! The rig's optics along the light path: colour wheel, modulation carriers (later: DMD,
-//! 4f Fourier filter, lens PSF).
+//! The rig's optics along the light path: colour wheel, modulation carriers, DMD and
+//! dithering, 4f Fourier filter, lens PSF and pixel integration.
 
 pub mod carriers;
+pub mod dither;
+pub mod dmd;
+pub mod fourier_filter;
+pub mod imaging;
+pub mod pattern_report;
+pub mod psf;
 pub mod wheel;
 
 pub use carriers::Carrier;
