@@ -2,9 +2,12 @@
 //! asks for is built and run in light-path order; a stage it does not ask for does not exist.
 
 use crate::error::{Error, Result};
+use crate::optics::imaging::{self, OpticsConfig};
 use crate::optics::Carrier;
 use crate::rig::Rig;
 use crate::scene::{self, Cube, Experiment, Materials, Quantity, Scene};
+use crate::sensor::{Sensor, SensorConfig};
+use crate::timing::{self, TimingConfig};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -14,12 +17,21 @@ pub struct State {
     pub scene: Option<Scene>,
     /// x_i: the scene seen through each wheel filter.
     pub channels: Option<Cube>,
+    /// White's value in each channel x_i (a white reflector, or the brightest band's scale).
+    pub white: Vec<f64>,
+    /// z_k = Σ_i w_ik x_i: the light that reaches the sample while pattern k is shown, when the
+    /// timing is modelled (None: z = x).
+    pub exposed: Option<Cube>,
+    /// White's value in each z_k.
+    pub exposed_white: Vec<f64>,
     /// s̃_k: the modulation patterns as they reach the sample.
     pub patterns: Option<Cube>,
     /// y: the frame.
     pub frame: Option<Cube>,
     /// The frame value of a white reflector under fully bright patterns (for the sensor's scale).
     pub full_scale: f32,
+    /// True once the sensor has turned the frame into raw DN.
+    pub raw: bool,
 }
 
 /// One step of the light path.
@@ -88,6 +100,13 @@ struct WheelStage {
     names: Vec<String>,
 }
 
+impl WheelStage {
+    /// White's value in each channel: the row sums of the projection.
+    fn white(&self) -> Vec<f64> {
+        self.w.iter().map(|r| r.iter().sum()).collect()
+    }
+}
+
 impl Stage for WheelStage {
     fn name(&self) -> &'static str {
         "colour-wheel"
@@ -104,6 +123,7 @@ impl Stage for WheelStage {
             .as_ref()
             .ok_or_else(|| missing("a scene", self.name()))?;
         st.channels = Some(scene.cube.mix(&self.w)?);
+        st.white = self.white();
         Ok(())
     }
 }
@@ -131,43 +151,116 @@ impl Stage for IdealPatternStage {
         )
     }
     fn run(&self, st: &mut State) -> Result<()> {
-        let mut p = Cube::zeros(self.width, self.height, self.carriers.len());
-        p.planes_mut()
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .zip(&self.carriers)
-            .for_each(|(plane, c)| {
-                plane.copy_from_slice(&c.ideal_pattern(self.width, self.height))
-            });
-        st.patterns = Some(p);
+        st.patterns = Some(Carrier::ideal_patterns(
+            &self.carriers,
+            self.width,
+            self.height,
+        ));
         Ok(())
     }
 }
 
-/// y = Σ_i x_i ⊙ s_i: the monochrome camera sums the modulated images.
-struct MultiplexStage {
-    white: Vec<f64>,
+/// s̃_i as the rig images them: DMD dithering, 4f Fourier pinhole filter, lens and pixel
+/// integration, only those the experiment asks for (optics/imaging.rs).
+struct ImagedPatternStage {
+    optics: OpticsConfig,
+    carriers: Vec<Carrier>,
+    width: usize,
+    height: usize,
 }
 
-impl Stage for MultiplexStage {
+impl Stage for ImagedPatternStage {
     fn name(&self) -> &'static str {
-        "multiplex"
+        "imaged-patterns"
     }
     fn describe(&self) -> String {
-        "y = Σ_i x_i ⊙ s_i (noiseless, unquantised)".into()
+        imaging::stage_names(&self.optics, self.width, self.height).join("\n                    ")
+    }
+    fn run(&self, st: &mut State) -> Result<()> {
+        st.patterns = Some(imaging::imaged_patterns(
+            &self.optics,
+            &self.carriers,
+            self.width,
+            self.height,
+        )?);
+        Ok(())
+    }
+}
+
+/// z_k = Σ_i w_ik x_i: the timing of wheel, DMD and exposure mixes the channels that each
+/// pattern sees (timing/).
+struct TimingStage {
+    w: Vec<Vec<f64>>,
+    warnings: Vec<String>,
+}
+
+impl Stage for TimingStage {
+    fn name(&self) -> &'static str {
+        "exposure-timing"
+    }
+    fn describe(&self) -> String {
+        let off: f64 = (0..self.w.len())
+            .flat_map(|i| (0..self.w.len()).map(move |k| (i, k)))
+            .filter(|(i, k)| i != k)
+            .map(|(i, k)| self.w[i][k].abs())
+            .fold(0.0, f64::max);
+        let mut s = format!(
+            "z_k = Σ_i w_ik x_i, diagonal {:.4}–{:.4}, largest off-diagonal {:.4}",
+            (0..self.w.len())
+                .map(|i| self.w[i][i])
+                .fold(f64::INFINITY, f64::min),
+            (0..self.w.len()).map(|i| self.w[i][i]).fold(0.0, f64::max),
+            off
+        );
+        for w in &self.warnings {
+            s += &format!("\n                    warning: {w}");
+        }
+        s
     }
     fn run(&self, st: &mut State) -> Result<()> {
         let x = st
             .channels
             .as_ref()
             .ok_or_else(|| missing("channels x_i", self.name()))?;
+        // mix() takes rows = outputs: z_k = Σ_i (wᵀ)_ki x_i.
+        let wt: Vec<Vec<f64>> = (0..self.w[0].len())
+            .map(|k| self.w.iter().map(|row| row[k]).collect())
+            .collect();
+        st.exposed_white = wt
+            .iter()
+            .map(|r| r.iter().zip(&st.white).map(|(a, b)| a * b).sum())
+            .collect();
+        st.exposed = Some(x.mix(&wt)?);
+        Ok(())
+    }
+}
+
+/// y = Σ_k z_k ⊙ s̃_k: the monochrome camera sums the modulated images.
+struct MultiplexStage;
+
+impl Stage for MultiplexStage {
+    fn name(&self) -> &'static str {
+        "multiplex"
+    }
+    fn describe(&self) -> String {
+        "y = Σ_k z_k ⊙ s̃_k (z = x without timing; noiseless, unquantised)".into()
+    }
+    fn run(&self, st: &mut State) -> Result<()> {
+        let (x, white) = match &st.exposed {
+            Some(z) => (z, &st.exposed_white),
+            None => (
+                st.channels
+                    .as_ref()
+                    .ok_or_else(|| missing("channels x_i", self.name()))?,
+                &st.white,
+            ),
+        };
         let s = st
             .patterns
             .as_ref()
             .ok_or_else(|| missing("patterns s_i", self.name()))?;
         x.check_same_shape(s, "channels against patterns")?;
         let mut y = Cube::zeros(x.width, x.height, 1);
-        let n = x.pixels();
         y.data
             .par_chunks_mut(4096)
             .enumerate()
@@ -183,17 +276,89 @@ impl Stage for MultiplexStage {
                     }
                 }
             });
-        debug_assert_eq!(y.data.len(), n);
-        let peak = (0..s.planes).map(|k| s.plane(k).iter().cloned().fold(0.0f32, f32::max));
-        st.full_scale = self
-            .white
-            .iter()
-            .zip(peak)
-            .map(|(w, p)| *w as f32 * p)
-            .sum();
+        st.full_scale = full_scale(white, s);
         st.frame = Some(y);
         Ok(())
     }
+}
+
+/// The frame value of a white reflector where every pattern is at its brightest:
+/// Σ_k white_k · max s̃_k. The sensor's "electrons at full scale" refers to it.
+pub fn full_scale(white: &[f64], patterns: &Cube) -> f32 {
+    white
+        .iter()
+        .enumerate()
+        .map(|(k, w)| *w as f32 * patterns.plane(k).iter().cloned().fold(0.0f32, f32::max))
+        .sum()
+}
+
+/// White's value in each z_k of the experiment: the projection's row sums, mixed by the
+/// timing weights when the rig has them. Used with [`full_scale`] by the calibration.
+pub fn exposed_white(rig: &Rig, weights: Option<&[Vec<f64>]>) -> Vec<f64> {
+    let white: Vec<f64> = rig.projection.w.row_iter().map(|r| r.sum()).collect();
+    match weights {
+        None => white,
+        Some(w) => (0..w[0].len())
+            .map(|k| w.iter().zip(&white).map(|(row, x)| row[k] * x).sum())
+            .collect(),
+    }
+}
+
+/// The patterns the experiment images onto the sample: simulated through its optics when it
+/// has any, else the ideal sinusoids (None, as `Reconstructor::new` takes them).
+pub fn patterns_for(exp: &Experiment, rig: &Rig) -> Result<Option<Cube>> {
+    if !exp.rig.has_optics() {
+        return Ok(None);
+    }
+    imaging::imaged_patterns(&exp.rig.optics(), &rig.carriers, rig.width, rig.height).map(Some)
+}
+
+/// The camera: electrons = frame × electrons_at_full_scale / full scale, then the EMVA 1288
+/// chain to raw DN (sensor/).
+struct SensorStage {
+    cfg: SensorConfig,
+    sensor: Sensor,
+}
+
+impl Stage for SensorStage {
+    fn name(&self) -> &'static str {
+        "sensor"
+    }
+    fn describe(&self) -> String {
+        let c = &self.cfg;
+        format!(
+            "EMVA 1288: {} e⁻ at full scale, full well {} e⁻, read noise {:.2} e⁻, dark {:.2} e⁻, \
+             PRNU {} %, DSNU {} e⁻, K {} DN/e⁻, offset {} DN, {} bit, seed {}",
+            c.electrons_at_full_scale,
+            c.full_well_e,
+            c.read_noise_e,
+            c.dark_electrons(),
+            100.0 * c.prnu_fraction,
+            c.dsnu_e,
+            c.gain_dn_per_e,
+            c.black_offset_dn,
+            c.bits,
+            c.seed
+        )
+    }
+    fn run(&self, st: &mut State) -> Result<()> {
+        let y = st
+            .frame
+            .as_ref()
+            .ok_or_else(|| missing("a frame", self.name()))?;
+        let e = self.sensor.electrons_from_relative(y, st.full_scale)?;
+        st.frame = Some(self.sensor.capture(&e, 0)?);
+        st.raw = true;
+        Ok(())
+    }
+}
+
+fn timing_stage(cfg: &TimingConfig) -> Result<TimingStage> {
+    let tw = timing::weights(cfg)?;
+    Ok(TimingStage {
+        w: tw.w,
+        warnings: tw.warnings,
+    })
 }
 
 impl Pipeline {
@@ -201,24 +366,40 @@ impl Pipeline {
     pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
-        let stages: Vec<Box<dyn Stage>> = vec![
+        let mut stages: Vec<Box<dyn Stage>> = vec![
             Box::new(SceneStage {
                 exp: exp.clone(),
                 materials: materials.clone(),
             }),
             Box::new(WheelStage {
-                w: rows.clone(),
+                w: rows,
                 names: rig.wheel.filters.iter().map(|f| f.name.clone()).collect(),
             }),
+        ];
+        stages.push(if exp.rig.has_optics() {
+            Box::new(ImagedPatternStage {
+                optics: exp.rig.optics(),
+                carriers: rig.carriers.clone(),
+                width: rig.width,
+                height: rig.height,
+            })
+        } else {
             Box::new(IdealPatternStage {
                 carriers: rig.carriers.clone(),
                 width: rig.width,
                 height: rig.height,
-            }),
-            Box::new(MultiplexStage {
-                white: rows.iter().map(|r| r.iter().sum()).collect(),
-            }),
-        ];
+            })
+        });
+        if let Some(t) = &exp.rig.timing {
+            stages.push(Box::new(timing_stage(t)?));
+        }
+        stages.push(Box::new(MultiplexStage));
+        if let Some(c) = &exp.rig.sensor {
+            stages.push(Box::new(SensorStage {
+                cfg: c.clone(),
+                sensor: Sensor::new(c, rig.width, rig.height)?,
+            }));
+        }
         Ok(Pipeline { stages })
     }
 

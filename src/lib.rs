@@ -16,6 +16,7 @@ pub mod run;
 pub mod scene;
 pub mod sensor;
 pub mod spectral;
+pub mod sweep;
 pub mod timing;
 
 pub use error::{Error, Result};

@@ -76,6 +76,48 @@ enum Command {
         #[arg(long)]
         no_gap: bool,
     },
+    /// Run an experiment over a grid of values of its keys and tabulate the error of each run
+    /// against the truth, e.g. `--vary rig.sensor.electrons_at_full_scale=10;100;1000`.
+    Sweep {
+        /// A built-in scene (dead-leaves, shaded-objects) or an experiment file.
+        experiment: String,
+        /// KEY=V1;V2;… (TOML values; a bare word is a string). Repeat for a Cartesian grid.
+        #[arg(long, required = true)]
+        vary: Vec<String>,
+        #[arg(long, default_value = "out/sweep")]
+        out: PathBuf,
+        /// Override the frame size (square).
+        #[arg(long)]
+        size: Option<usize>,
+    },
+    /// Pattern report: for each channel the error of the imaged pattern s̃ against the ideal
+    /// sinusoid, its carrier gain, the 2ω and cross-window energies, the pinhole throughput,
+    /// and PNGs of the binary and imaged patterns and their spectra.
+    Patterns {
+        experiment: String,
+        #[arg(long, default_value = "out/patterns")]
+        out: PathBuf,
+        #[arg(long)]
+        size: Option<usize>,
+    },
+    /// Timing report: the weight matrix w_ik of one exposure, the operator's warnings and a
+    /// timeline PNG (wheel segment, pattern shown, exposure window).
+    Timing {
+        experiment: String,
+        #[arg(long, default_value = "out/timing")]
+        out: PathBuf,
+    },
+    /// EMVA 1288 photon-transfer measurement of the experiment's camera ([rig.sensor], else the
+    /// default): K, read noise, full well, PRNU, DSNU, and the photon-transfer curve as a PNG.
+    Ptc {
+        /// An experiment file (default: the prototype's camera).
+        experiment: Option<String>,
+        /// Side of the square test frames.
+        #[arg(long, default_value_t = 256)]
+        size: usize,
+        #[arg(long, default_value = "out/ptc")]
+        out: PathBuf,
+    },
     /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig.
     Reconstruct {
         frame: PathBuf,
@@ -138,6 +180,23 @@ fn dispatch(cmd: Command, lib: &Library) -> Result<()> {
             size,
             no_gap,
         } => sweep_crop(&experiments, &out, size, no_gap, lib),
+        Command::Sweep {
+            experiment,
+            vary,
+            out,
+            size,
+        } => sweep(&experiment, &vary, &out, size, lib),
+        Command::Patterns {
+            experiment,
+            out,
+            size,
+        } => patterns(&experiment, &out, size, lib),
+        Command::Timing { experiment, out } => timing(&experiment, &out),
+        Command::Ptc {
+            experiment,
+            size,
+            out,
+        } => ptc(experiment.as_deref(), size, &out),
         Command::Reconstruct {
             frame,
             experiment,
@@ -287,6 +346,163 @@ fn sweep_crop(
     Ok(())
 }
 
+fn sweep(
+    scene: &str,
+    vary: &[String],
+    out: &Path,
+    size: Option<usize>,
+    lib: &Library,
+) -> Result<()> {
+    let exp = experiment_for(scene, size)?;
+    let vary = vary
+        .iter()
+        .map(|v| specmux::sweep::Vary::parse(v))
+        .collect::<Result<Vec<_>>>()?;
+    let rows = specmux::sweep::sweep(&exp, &vary, lib)?;
+    let md = specmux::sweep::markdown(&vary, &rows);
+    say!(
+        "{}: {}×{}\n{md}",
+        exp.file,
+        exp.scene.size[0],
+        exp.scene.size[1]
+    );
+    specmux::atomic::write_bytes(&out.join("sweep.md"), md.as_bytes())?;
+    report::write_json(&out.join("sweep.json"), &rows)?;
+    say!("wrote {}", out.display());
+    Ok(())
+}
+
+fn patterns(scene: &str, out: &Path, size: Option<usize>, lib: &Library) -> Result<()> {
+    let exp = experiment_for(scene, size)?;
+    let materials = specmux::scene::Materials::load(lib)?;
+    let rig = specmux::rig::Rig::build(&exp, lib, &materials)?;
+    let (rep, set) = specmux::optics::pattern_report::pattern_report(
+        &exp.rig.optics(),
+        &rig.carriers,
+        rig.width,
+        rig.height,
+        exp.reconstruct.crop,
+    )?;
+    for s in &rep.stages {
+        say!("{s}");
+    }
+    say!(
+        "\n{:<3} {:>14} {:>10} {:>10} {:>7} {:>9} {:>10} {:>10} {:>10}",
+        "ch",
+        "carrier",
+        "rms err",
+        "residual",
+        "gain",
+        "phase °",
+        "2ω",
+        "worst x",
+        "through"
+    );
+    for (i, c) in rep.channels.iter().enumerate() {
+        let worst = c
+            .crosstalk
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, v)| *v)
+            .fold(0.0, f64::max);
+        say!(
+            "{:<3} {:>14} {:>10.4} {:>10.4} {:>7.3} {:>9.2} {:>10.2e} {:>10.2e} {:>10.4}",
+            i,
+            format!("({},{})", c.fx, c.fy),
+            c.rel_rms_error,
+            c.residual_error,
+            c.gain,
+            c.gain_phase_rad.to_degrees(),
+            c.harmonic_2w,
+            worst,
+            c.throughput
+        );
+    }
+    say!("\ncrosstalk (energy in window j / own window), rows = channel i:");
+    for c in &rep.channels {
+        let row: Vec<String> = c.crosstalk.iter().map(|v| format!("{v:9.2e}")).collect();
+        say!("{}", row.join(" "));
+    }
+    specmux::optics::pattern_report::write_pattern_pngs(&set, out)?;
+    report::write_json(&out.join("patterns.json"), &rep)?;
+    say!("wrote {}", out.display());
+    Ok(())
+}
+
+fn timing(scene: &str, out: &Path) -> Result<()> {
+    let exp = experiment_for(scene, None)?;
+    let cfg = exp.rig.timing.clone().ok_or_else(|| {
+        Error::config(
+            &exp.file,
+            "rig.timing",
+            "absent",
+            "the experiment has no [rig.timing] section to report on",
+        )
+    })?;
+    let tw = specmux::timing::weights(&cfg)?;
+    say!(
+        "exposure {} s = {:.4} wheel turns; spot on a spoke {:.2} % of the time",
+        cfg.camera.exposure_s,
+        tw.turns_per_exposure,
+        100.0 * tw.spoke_fraction
+    );
+    say!("weights w_ik (rows: filter i, columns: pattern k):");
+    for row in &tw.w {
+        let r: Vec<String> = row.iter().map(|v| format!("{v:8.5}")).collect();
+        say!("{}", r.join(" "));
+    }
+    for w in &tw.warnings {
+        say!("warning: {w}");
+    }
+    if tw.warnings.is_empty() {
+        say!("no warnings: whole turns, aligned, within the DMD's and the camera's rates");
+    }
+    specmux::timing::timeline_png(&cfg, &out.join("timeline.png"))?;
+    report::write_json(&out.join("timing.json"), &tw)?;
+    say!("wrote {}", out.display());
+    Ok(())
+}
+
+fn ptc(scene: Option<&str>, size: usize, out: &Path) -> Result<()> {
+    let cfg = match scene {
+        Some(s) => experiment_for(s, None)?.rig.sensor.unwrap_or_default(),
+        None => specmux::sensor::SensorConfig::default(),
+    };
+    let sensor = specmux::sensor::Sensor::new(&cfg, size, size)?;
+    let r = specmux::sensor::photon_transfer(
+        &sensor,
+        &specmux::sensor::default_levels(cfg.full_well_e),
+    )?;
+    say!("{:<22} {:>12} {:>12}", "EMVA 1288", "measured", "given");
+    for (name, m, g) in [
+        ("K (DN/e⁻)", r.k_dn_per_e, cfg.gain_dn_per_e),
+        (
+            "dark noise (e⁻)",
+            r.read_noise_e,
+            (cfg.read_noise_e.powi(2) + cfg.dark_electrons()).sqrt(),
+        ),
+        ("full well (e⁻)", r.full_well_e, cfg.full_well_e),
+        (
+            "PRNU (%)",
+            100.0 * r.prnu_fraction,
+            100.0 * cfg.prnu_fraction,
+        ),
+        ("DSNU (e⁻)", r.dsnu_e, cfg.dsnu_e),
+    ] {
+        say!("{name:<22} {m:>12.4} {g:>12.4}");
+    }
+    say!(
+        "K standard error {:.2e} DN/e⁻ over {} pixels",
+        r.k_stderr_dn_per_e,
+        r.pixels
+    );
+    specmux::sensor::plot_ptc(&r, &out.join("ptc.png"))?;
+    report::write_json(&out.join("ptc.json"), &r)?;
+    say!("wrote {}", out.display());
+    Ok(())
+}
+
 fn simulate(path: &Path, explain: bool, out: &Path, lib: &Library) -> Result<()> {
     let exp = load(path)?;
     let materials = specmux::scene::Materials::load(lib)?;
@@ -339,16 +555,14 @@ fn reconstruct(
     exp.validate()?;
     let materials = specmux::scene::Materials::load(lib)?;
     let rig = specmux::rig::Rig::build(&exp, lib, &materials)?;
-    let recon = specmux::recon::Reconstructor::new(&exp, &rig, None)?;
-    let t = std::time::Instant::now();
-    let xhat = recon.demultiplex(&frame)?;
-    let t_demux = t.elapsed().as_secs_f64();
-    let t = std::time::Instant::now();
-    let (cube, stats) = recon.unmix(&xhat)?;
-    let t_unmix = t.elapsed().as_secs_f64();
+    let patterns = specmux::forward::patterns_for(&exp, &rig)?;
+    let recon = specmux::recon::Reconstructor::new(&exp, &rig, patterns.as_ref())?;
+    let r = recon.run(&frame, None)?;
+    let [t_demux, t_gap, t_unmix] = r.seconds;
+    let (cube, stats) = (r.cube, r.unmix);
     exr_io::write(&out.join("cube.exr"), &cube, &band_names(&rig.grid))?;
     say!(
-        "demultiplex {t_demux:.4} s, unmix {t_unmix:.4} s ({} pixels bound by r ≥ 0)",
+        "demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s ({} pixels bound by r ≥ 0)",
         stats.constrained_pixels
     );
     if let Some(tp) = truth {

@@ -2,6 +2,8 @@
 //! their default layout, and the check that the crop windows around 0 and ±ω_i stay apart.
 
 use crate::error::{Error, Result};
+use crate::scene::Cube;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// One carrier: frequency in cycles per pixel along x (columns) and y (rows), and a phase.
@@ -29,6 +31,17 @@ impl Carrier {
             }
         }
         out
+    }
+
+    /// The ideal patterns of several carriers, one plane each (computed in parallel).
+    pub fn ideal_patterns(carriers: &[Carrier], width: usize, height: usize) -> Cube {
+        let mut p = Cube::zeros(width, height, carriers.len());
+        p.planes_mut()
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .zip(carriers)
+            .for_each(|(plane, c)| plane.copy_from_slice(&c.ideal_pattern(width, height)));
+        p
     }
 
     /// Centre bin of the +ω window on an `n`-point axis (frequency × n, rounded).

@@ -159,10 +159,7 @@ pub fn simulate_patterns(
     }
     let n = carriers.len();
     if cfg.dmd.is_none() && cfg.fourier_filter.is_none() && cfg.lens.is_none() {
-        let mut imaged = Cube::zeros(w, h, n);
-        for (plane, c) in imaged.planes_mut().zip(carriers) {
-            plane.copy_from_slice(&c.ideal_pattern(w, h));
-        }
+        let imaged = Carrier::ideal_patterns(carriers, w, h);
         let display: Vec<f32> = imaged.data.iter().map(|v| v / 2.0).collect();
         return Ok(PatternSet {
             targets: Cube::from_vec(w, h, n, display.clone())?,

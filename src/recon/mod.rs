@@ -12,10 +12,48 @@ pub mod wavelet;
 pub use demux::Demux;
 
 use crate::error::Result;
+use crate::optics::Carrier;
 use crate::recon::gap::{Gap, GapStats, Method};
 use crate::recon::qp::{UnmixStats, Unmixer};
 use crate::rig::Rig;
+use crate::scene::experiment::CrosstalkCorrection;
 use crate::scene::{Cube, Experiment};
+use crate::sensor::{self, Sensor};
+use crate::timing;
+use std::time::Instant;
+
+/// Everything one frame's reconstruction produced, with the wall time of each step.
+pub struct Reconstruction {
+    /// x̂: the Fourier estimates of the channels (crosstalk undone).
+    pub xhat: Cube,
+    /// x̂ after de-aliasing (= `xhat` for `fourier`).
+    pub xgap: Cube,
+    /// r̂: the cube.
+    pub cube: Cube,
+    pub gap: GapStats,
+    pub unmix: UnmixStats,
+    /// Seconds of calibration + demultiplexing + crosstalk, of de-aliasing, of unmixing.
+    pub seconds: [f64; 3],
+}
+
+/// Dark and flat frames of the camera and the DN of one frame unit: raw DN → the noiseless
+/// frame's units, as the real rig corrects its raw frames (sensor/calibration.rs).
+pub struct Calibration {
+    pub dark: Cube,
+    pub flat: Cube,
+    /// DN per frame unit: K · electrons_at_full_scale / full scale.
+    pub dn_per_unit: f64,
+}
+
+impl Calibration {
+    /// (raw − dark)/(flat − dark)·mean(flat − dark) / dn_per_unit.
+    pub fn apply(&self, raw: &Cube) -> Result<Cube> {
+        let mut c = sensor::calibrate(raw, &self.dark, &self.flat)?;
+        let s = (1.0 / self.dn_per_unit) as f32;
+        c.data.iter_mut().for_each(|v| *v *= s);
+        Ok(c)
+    }
+}
 
 /// Demultiplexer and unmixer for one rig, built once and applied to every frame.
 pub struct Reconstructor {
@@ -25,6 +63,12 @@ pub struct Reconstructor {
     pub unmixer: Unmixer,
     /// Per-band gains L̃ of a radiance scene's light (`Rig::light_gains`): r̂ = diag(L̃)·Bα.
     pub light: Option<Vec<f32>>,
+    /// The exposure weights w_ik (filter i, pattern k) the frame was taken with, if modelled.
+    pub weights: Option<Vec<Vec<f64>>>,
+    /// M = (Wᵀ)⁻¹: x_i = Σ_k M_ik z_k undoes the exposure crosstalk (None: not corrected).
+    pub demix: Option<Vec<Vec<f64>>>,
+    /// Dark/flat correction of raw frames when the rig has a sensor.
+    pub calibration: Option<Calibration>,
 }
 
 impl Reconstructor {
@@ -46,12 +90,7 @@ impl Reconstructor {
                 let s = match patterns {
                     Some(p) => p,
                     None => {
-                        let data = rig
-                            .carriers
-                            .iter()
-                            .flat_map(|c| c.ideal_pattern(rig.width, rig.height))
-                            .collect();
-                        ideal = Cube::from_vec(rig.width, rig.height, rig.carriers.len(), data)?;
+                        ideal = Carrier::ideal_patterns(&rig.carriers, rig.width, rig.height);
                         &ideal
                     }
                 };
@@ -61,30 +100,98 @@ impl Reconstructor {
         let light = rig
             .light_gains()
             .map(|g| g.iter().map(|&v| v as f32).collect());
+        let r = &exp.reconstruct;
+        let weights = match (&r.crosstalk_weights, &exp.rig.timing) {
+            (Some(w), _) => Some(w.clone()),
+            (None, Some(t)) => Some(timing::weights(t)?.w),
+            (None, None) => None,
+        };
+        let demix = match (r.crosstalk, &weights) {
+            (CrosstalkCorrection::Timing, Some(w)) => Some(timing::crosstalk_inverse(w)?),
+            _ => None,
+        };
+        let calibration = match &exp.rig.sensor {
+            None => None,
+            Some(cfg) => {
+                let cam = Sensor::new(cfg, rig.width, rig.height)?;
+                let ideal;
+                let s = match patterns {
+                    Some(p) => p,
+                    None => {
+                        ideal = Carrier::ideal_patterns(&rig.carriers, rig.width, rig.height);
+                        &ideal
+                    }
+                };
+                let timing_w = exp.rig.timing.as_ref().map(timing::weights).transpose()?;
+                let white = crate::forward::exposed_white(rig, timing_w.as_ref().map(|t| &t.w[..]));
+                let fs = crate::forward::full_scale(&white, s) as f64;
+                // A flat at half the full-scale exposure: bright, and far from the full well.
+                let level = 0.5 * cfg.electrons_at_full_scale.min(cfg.full_well_e);
+                Some(Calibration {
+                    dark: cam.dark_frame(r.calibration_frames)?,
+                    flat: cam.flat_frame(level, r.calibration_frames)?,
+                    dn_per_unit: cfg.gain_dn_per_e * cfg.electrons_at_full_scale / fs,
+                })
+            }
+        };
         Ok(Reconstructor {
             demux,
             gap,
             unmixer,
             light,
+            weights,
+            demix,
+            calibration,
         })
+    }
+
+    /// The frame in the noiseless frame's units: dark- and flat-corrected when it is raw.
+    pub fn prepare(&self, frame: &Cube) -> Result<Cube> {
+        match &self.calibration {
+            Some(c) => c.apply(frame),
+            None => Ok(frame.clone()),
+        }
+    }
+
+    /// The whole chain on one frame: calibrate, demultiplex, de-alias (on what each pattern saw,
+    /// z; `z_truth` gives GAP's per-iteration PSNR), undo the crosstalk, unmix.
+    pub fn run(&self, frame: &Cube, z_truth: Option<&Cube>) -> Result<Reconstruction> {
+        let t = Instant::now();
+        let measured = self.prepare(frame)?;
+        let zhat = self.demultiplex(&measured)?;
+        let xhat = self.demix(&zhat)?;
+        let t1 = t.elapsed().as_secs_f64();
+        let (xgap, gap) = match &self.gap {
+            Some(g) => {
+                let (z, stats) = g.run(&measured, &zhat, z_truth)?;
+                (self.demix(&z)?, stats)
+            }
+            None => (xhat.clone(), GapStats::default()),
+        };
+        let t2 = t.elapsed().as_secs_f64();
+        let (cube, unmix) = self.unmix(&xgap)?;
+        let t3 = t.elapsed().as_secs_f64();
+        Ok(Reconstruction {
+            xhat,
+            xgap,
+            cube,
+            gap,
+            unmix,
+            seconds: [t1, t2 - t1, t3 - t2],
+        })
+    }
+
+    /// x = M·z per pixel (M = (Wᵀ)⁻¹); z unchanged without a correction.
+    pub fn demix(&self, z: &Cube) -> Result<Cube> {
+        match &self.demix {
+            Some(m) => z.mix(m),
+            None => Ok(z.clone()),
+        }
     }
 
     /// x̂: one plane per wheel channel.
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
         self.demux.run(frame)
-    }
-
-    /// GAP de-aliasing of x̂ (x̂ itself for `fourier`); with `truth`, PSNR per iteration.
-    pub fn dealias(
-        &self,
-        frame: &Cube,
-        xhat: &Cube,
-        truth: Option<&Cube>,
-    ) -> Result<(Cube, GapStats)> {
-        match &self.gap {
-            Some(g) => g.run(frame, xhat, truth),
-            None => Ok((xhat.clone(), GapStats::default())),
-        }
     }
 
     /// r̂ = B α per pixel, non-negative (times the light gains L̃ for a lit radiance scene).

@@ -3,6 +3,12 @@
 
 use crate::error::{Error, Result};
 use crate::optics::carriers::{self, Carrier};
+use crate::optics::dmd::DmdConfig;
+use crate::optics::fourier_filter::FourierFilterConfig;
+use crate::optics::imaging::OpticsConfig;
+use crate::optics::psf::LensConfig;
+use crate::sensor::SensorConfig;
+use crate::timing::TimingConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -58,13 +64,36 @@ impl Default for SceneConfig {
     }
 }
 
-/// The rig, one field per module of the light path.
+/// The rig, one field per module of the light path. An absent optional section is a stage that
+/// is not simulated: no `dmd`, `fourier_filter` or `lens` gives ideal grey sinusoids, no `timing`
+/// equal exposure weights, no `sensor` a noiseless, unquantised frame.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RigConfig {
     pub wheel: WheelConfig,
     pub camera: CameraConfig,
     pub carriers: CarrierConfig,
+    pub dmd: Option<DmdConfig>,
+    pub fourier_filter: Option<FourierFilterConfig>,
+    pub lens: Option<LensConfig>,
+    pub timing: Option<TimingConfig>,
+    pub sensor: Option<SensorConfig>,
+}
+
+impl RigConfig {
+    /// The optical stages between the carriers and the sensor.
+    pub fn optics(&self) -> OpticsConfig {
+        OpticsConfig {
+            dmd: self.dmd.clone(),
+            fourier_filter: self.fourier_filter.clone(),
+            lens: self.lens.clone(),
+        }
+    }
+
+    /// True when any optical stage is asked for (the patterns are then simulated, not ideal).
+    pub fn has_optics(&self) -> bool {
+        self.dmd.is_some() || self.fourier_filter.is_some() || self.lens.is_some()
+    }
 }
 
 /// The colour wheel's segments, as curve names under spectra/.
@@ -143,6 +172,23 @@ pub struct ReconstructConfig {
     pub basis: usize,
     /// GAP de-aliasing of the Fourier estimates (`[reconstruct.gap]`; docs/gap.md).
     pub gap: crate::recon::gap::GapConfig,
+    /// Undo the exposure crosstalk between channels before unmixing (x = (Wᵀ)⁻¹ z per pixel):
+    /// `timing` uses the weights of `[rig.timing]` (nothing to undo without it), `none` leaves
+    /// the demultiplexed carriers as they are.
+    pub crosstalk: CrosstalkCorrection,
+    /// Measured weights w_ik (filter i, pattern k) from a calibration; they replace the timing
+    /// model's when given.
+    pub crosstalk_weights: Option<Vec<Vec<f64>>>,
+    /// Frames averaged for the dark and the flat calibration frames when `[rig.sensor]` is set.
+    pub calibration_frames: usize,
+}
+
+/// Where the reconstruction takes the exposure weights w_ik from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CrosstalkCorrection {
+    Timing,
+    None,
 }
 
 impl Default for ReconstructConfig {
@@ -153,6 +199,9 @@ impl Default for ReconstructConfig {
             eta: 200.0,
             basis: 6,
             gap: Default::default(),
+            crosstalk: CrosstalkCorrection::Timing,
+            crosstalk_weights: None,
+            calibration_frames: 16,
         }
     }
 }
@@ -326,6 +375,42 @@ impl Experiment {
             ));
         }
         r.gap.validate(f)?;
+        self.rig.optics().validate(f)?;
+        if let Some(t) = &self.rig.timing {
+            t.validate(f)?;
+            if t.segment_count() != n {
+                return Err(Error::config(
+                    f,
+                    "rig.timing.wheel.segments_deg",
+                    format!("{} segments", t.segment_count()),
+                    &format!("needs one segment per wheel filter ({n})"),
+                ));
+            }
+        }
+        if let Some(s) = &self.rig.sensor {
+            s.validate(f)?;
+        }
+        if let Some(w) = &r.crosstalk_weights {
+            if w.len() != n
+                || w.iter()
+                    .any(|row| row.len() != n || row.iter().any(|v| !v.is_finite()))
+            {
+                return Err(Error::config(
+                    f,
+                    "reconstruct.crosstalk_weights",
+                    format!("{w:?}"),
+                    &format!("needs {n} rows of {n} finite weights (filter × pattern)"),
+                ));
+            }
+        }
+        if !(1..=1024).contains(&r.calibration_frames) {
+            return Err(Error::config(
+                f,
+                "reconstruct.calibration_frames",
+                r.calibration_frames,
+                "must be 1 to 1024 frames",
+            ));
+        }
         carriers::check_layout(&self.carriers(), r.crop, s.size[0], s.size[1], f)
     }
 }

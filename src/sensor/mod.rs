@@ -22,7 +22,9 @@ mod radiometry;
 
 pub use calibration::calibrate;
 pub use config::{SensorConfig, MAX_PRNU_FRACTION};
-pub use ptc::{photon_transfer, plot_ptc, PtcPoint, PtcResult, NONUNIFORMITY_FRAMES};
+pub use ptc::{
+    default_levels, photon_transfer, plot_ptc, PtcPoint, PtcResult, NONUNIFORMITY_FRAMES,
+};
 pub use radiometry::{photo_electrons, SpectralIrradiance};
 
 use crate::error::{Error, Result};

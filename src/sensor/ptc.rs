@@ -101,6 +101,16 @@ fn spatial_statistics(c: &Cube) -> (f64, f64) {
     (mean, var)
 }
 
+/// Levels for a photon-transfer curve of a camera with this full well: 27 even steps up to 90 %
+/// of it, then 26 steps of 1/150 of it past saturation, where the variance curve turns over.
+pub fn default_levels(full_well_e: f64) -> Vec<f64> {
+    let coarse = full_well_e / 30.0;
+    let fine = full_well_e / 150.0;
+    let mut levels: Vec<f64> = (1..=27).map(|i| i as f64 * coarse).collect();
+    levels.extend((1..=26).map(|i| 27.0 * coarse + i as f64 * fine));
+    levels
+}
+
 /// Run the EMVA 1288 photon-transfer measurement at mean photo-electron `levels` (before PRNU).
 /// The levels must climb past saturation so that the variance curve has its maximum inside.
 pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {

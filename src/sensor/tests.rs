@@ -429,9 +429,12 @@ fn photon_transfer_recovers_the_camera() {
     let cfg = SensorConfig::default();
     let sensor = Sensor::new(&cfg, 256, 256).unwrap();
     let fw = cfg.full_well_e;
-    let step = 100.0;
-    let mut levels: Vec<f64> = (1..=27).map(|i| i as f64 * 500.0).collect();
-    levels.extend((0..26).map(|i| 13_600.0 + i as f64 * step));
+    let step = fw / 150.0;
+    let levels = default_levels(fw);
+    assert_eq!(
+        (levels[26], levels[27], levels.len()),
+        (13_500.0, 13_600.0, 53)
+    );
     let r = photon_transfer(&sensor, &levels).unwrap();
     let n = r.pixels as f64;
     let k = cfg.gain_dn_per_e;
