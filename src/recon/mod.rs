@@ -125,8 +125,9 @@ impl Reconstructor {
                 let timing_w = exp.rig.timing.as_ref().map(timing::weights).transpose()?;
                 let white = crate::forward::exposed_white(rig, timing_w.as_ref().map(|t| &t.w[..]));
                 let fs = crate::forward::full_scale(&white, s) as f64;
-                // A flat at half the full-scale exposure: bright, and far from the full well.
-                let level = 0.5 * cfg.electrons_at_full_scale.min(cfg.full_well_e);
+                // The flat is taken with its own bright uniform source at half the full well,
+                // whatever the scene's exposure: bright enough for a low-noise gain map.
+                let level = 0.5 * cfg.full_well_e;
                 Some(Calibration {
                     dark: cam.dark_frame(r.calibration_frames)?,
                     flat: cam.flat_frame(level, r.calibration_frames)?,
