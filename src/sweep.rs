@@ -123,9 +123,11 @@ pub struct SweepRow {
 /// Run `base` at every point of the grid.
 pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<SweepRow>> {
     let mut rows = Vec::new();
-    for point in grid(vary) {
-        let values = point.iter().map(|(_, v)| v.to_string()).collect();
-        let exp = with_values(base, &point)?;
+    let points = grid(vary);
+    for (n, point) in points.iter().enumerate() {
+        let values: Vec<String> = point.iter().map(|(_, v)| v.to_string()).collect();
+        eprintln!("sweep {}/{}: {}", n + 1, points.len(), values.join(", "));
+        let exp = with_values(base, point)?;
         let row = match run::run(&exp, lib) {
             Ok((rep, _)) => {
                 let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));

@@ -83,19 +83,15 @@ impl Reconstructor {
         // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
         let eta = exp.reconstruct.eta / rig.grid.step_nm.powi(4);
         let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
-        let gap = match exp.reconstruct.gap.method {
-            Method::Fourier => None,
-            _ => {
-                let ideal;
-                let s = match patterns {
-                    Some(p) => p,
-                    None => {
-                        ideal = Carrier::ideal_patterns(&rig.carriers, rig.width, rig.height);
-                        &ideal
-                    }
-                };
-                Some(Gap::new(s, &exp.reconstruct.gap, &exp.file)?)
-            }
+        // The patterns GAP and the calibration work with: as given, else the design sinusoids
+        // (computed only when one of them is asked for).
+        let needs_patterns = exp.reconstruct.gap.method != Method::Fourier || exp.rig.sensor.is_some();
+        let ideal = (patterns.is_none() && needs_patterns)
+            .then(|| Carrier::ideal_patterns(&rig.carriers, rig.width, rig.height));
+        let s = patterns.or(ideal.as_ref());
+        let gap = match (exp.reconstruct.gap.method, s) {
+            (Method::Fourier, _) | (_, None) => None,
+            (_, Some(s)) => Some(Gap::new(s, &exp.reconstruct.gap, &exp.file)?),
         };
         let light = rig
             .light_gains()
@@ -110,20 +106,10 @@ impl Reconstructor {
             (CrosstalkCorrection::Timing, Some(w)) => Some(timing::crosstalk_inverse(w)?),
             _ => None,
         };
-        let calibration = match &exp.rig.sensor {
-            None => None,
-            Some(cfg) => {
+        let calibration = match (&exp.rig.sensor, s) {
+            (Some(cfg), Some(s)) => {
                 let cam = Sensor::new(cfg, rig.width, rig.height)?;
-                let ideal;
-                let s = match patterns {
-                    Some(p) => p,
-                    None => {
-                        ideal = Carrier::ideal_patterns(&rig.carriers, rig.width, rig.height);
-                        &ideal
-                    }
-                };
-                let timing_w = exp.rig.timing.as_ref().map(timing::weights).transpose()?;
-                let white = crate::forward::exposed_white(rig, timing_w.as_ref().map(|t| &t.w[..]));
+                let white = crate::forward::exposed_white(rig, weights.as_deref());
                 let fs = crate::forward::full_scale(&white, s) as f64;
                 // The flat is taken with its own bright uniform source at half the full well,
                 // whatever the scene's exposure: bright enough for a low-noise gain map.
@@ -134,6 +120,7 @@ impl Reconstructor {
                     dn_per_unit: cfg.gain_dn_per_e * cfg.electrons_at_full_scale / fs,
                 })
             }
+            _ => None,
         };
         Ok(Reconstructor {
             demux,

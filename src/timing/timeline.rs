@@ -6,27 +6,12 @@ use super::weights::weights;
 use super::TimingConfig;
 use crate::error::{Error, Result};
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 use std::path::Path;
 
 const WIDTH: u32 = 1500;
 const PANELS_HEIGHT: u32 = 560;
 const LINE: u32 = 22;
 
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // The bundled font is a valid TrueType file; a failure would only lose the labels.
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            include_bytes!(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/assets/DejaVuSans.ttf"
-            )),
-        );
-    });
-}
 
 /// Segment/pattern colour i of n (hue wheel, so any n works).
 fn colour(i: usize, n: usize) -> HSLColor {
@@ -44,7 +29,7 @@ fn plot_error(path: &Path, e: impl std::fmt::Display) -> Error {
 pub fn timeline_png(cfg: &TimingConfig, path: &Path) -> Result<()> {
     let tw = weights(cfg)?;
     let s = Schedule::new(cfg);
-    register_font();
+    crate::report::register_font();
     let text_lines = 3 + s.n + tw.warnings.len();
     let height = PANELS_HEIGHT + LINE * text_lines as u32 + 20;
     let mut buf = vec![255u8; (WIDTH * height * 3) as usize];
