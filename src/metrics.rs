@@ -39,7 +39,7 @@ pub fn compare(truth: &Cube, estimate: &Cube) -> Result<Metrics> {
         ));
     }
     let peak = truth.max() as f64;
-    if !(peak > 0.0) {
+    if peak.is_nan() || peak <= 0.0 {
         return Err(Error::Numerical(format!(
             "the truth's peak is {peak}: PSNR and SSIM need a positive peak"
         )));

@@ -143,12 +143,32 @@ fn out_of_range_values_in_the_light_path_sections() {
     let d = tmpdir("ranges");
     for (toml, key, value) in [
         ("[rig.sensor]\nbits = 40\n", "rig.sensor.bits", "40"),
-        ("[rig.sensor]\nprnu_fraction = -0.1\n", "rig.sensor.prnu_fraction", "-0.1"),
-        ("[rig.timing.dmd]\nmax_rate_hz = nan\n", "rig.timing.dmd.max_rate_hz", "NaN"),
-        ("[rig.timing.wheel]\nsegments_deg = [60, 60, 60, 60, 60, 50]\n", "rig.timing.wheel.segments_deg", "50"),
-        ("[rig.fourier_filter]\npinhole_radius_um = 0\n", "rig.fourier_filter.pinhole_radius_um", "0"),
+        (
+            "[rig.sensor]\nprnu_fraction = -0.1\n",
+            "rig.sensor.prnu_fraction",
+            "-0.1",
+        ),
+        (
+            "[rig.timing.dmd]\nmax_rate_hz = nan\n",
+            "rig.timing.dmd.max_rate_hz",
+            "NaN",
+        ),
+        (
+            "[rig.timing.wheel]\nsegments_deg = [60, 60, 60, 60, 60, 50]\n",
+            "rig.timing.wheel.segments_deg",
+            "50",
+        ),
+        (
+            "[rig.fourier_filter]\npinhole_radius_um = 0\n",
+            "rig.fourier_filter.pinhole_radius_um",
+            "0",
+        ),
         ("[rig.lens]\nna = 2\n", "rig.lens.na", "2"),
-        ("[reconstruct]\ncrosstalk_weights = [[1, 0]]\n", "reconstruct.crosstalk_weights", "[[1.0, 0.0]]"),
+        (
+            "[reconstruct]\ncrosstalk_weights = [[1, 0]]\n",
+            "reconstruct.crosstalk_weights",
+            "[[1.0, 0.0]]",
+        ),
     ] {
         let (ok, err) = simulate(&d, toml, None);
         assert_one_line_error(ok, &err, &["exp.toml", key, value]);

@@ -34,7 +34,11 @@ fn delays(fraction: f64) -> String {
 }
 
 fn rel_rms(a: &[f32], b: &[f32]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum();
+    let num: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+        .sum();
     let den: f64 = b.iter().map(|y| (*y as f64).powi(2)).sum();
     (num / den).sqrt()
 }
@@ -59,7 +63,14 @@ fn explain_lists_only_the_stages_asked_for() {
     );
     assert_eq!(
         names(&full),
-        ["scene", "colour-wheel", "imaged-patterns", "exposure-timing", "multiplex", "sensor"]
+        [
+            "scene",
+            "colour-wheel",
+            "imaged-patterns",
+            "exposure-timing",
+            "multiplex",
+            "sensor"
+        ]
     );
     assert_eq!(
         names(&experiment("[rig.lens]\n")),
@@ -73,10 +84,22 @@ fn timing_weights_mix_the_channels_into_the_frame() {
     let exp = experiment(&format!("[rig.timing]\n{}", delays(0.3)));
     let (rig, m) = setup(&exp);
     let (st, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
-    let w = specmux::timing::weights(exp.rig.timing.as_ref().unwrap()).unwrap().w;
-    assert!((w[0][0] - 0.7).abs() < 1e-6 && (w[1][0] - 0.3).abs() < 1e-6, "{w:?}");
-    assert!((w[0][5] - 0.3).abs() < 1e-6 && w[0][1].abs() < 1e-9, "{w:?}");
-    let (x, s, y) = (st.channels.unwrap(), st.patterns.unwrap(), st.frame.unwrap());
+    let w = specmux::timing::weights(exp.rig.timing.as_ref().unwrap())
+        .unwrap()
+        .w;
+    assert!(
+        (w[0][0] - 0.7).abs() < 1e-6 && (w[1][0] - 0.3).abs() < 1e-6,
+        "{w:?}"
+    );
+    assert!(
+        (w[0][5] - 0.3).abs() < 1e-6 && w[0][1].abs() < 1e-9,
+        "{w:?}"
+    );
+    let (x, s, y) = (
+        st.channels.unwrap(),
+        st.patterns.unwrap(),
+        st.frame.unwrap(),
+    );
     for p in (0..x.pixels()).step_by(97) {
         let want: f64 = (0..6)
             .map(|k| {
@@ -84,7 +107,10 @@ fn timing_weights_mix_the_channels_into_the_frame() {
                 z * s.plane(k)[p] as f64
             })
             .sum();
-        assert!((y.data[p] as f64 - want).abs() < 1e-5 * want.abs().max(1.0), "pixel {p}");
+        assert!(
+            (y.data[p] as f64 - want).abs() < 1e-5 * want.abs().max(1.0),
+            "pixel {p}"
+        );
     }
 }
 
@@ -100,8 +126,8 @@ fn crosstalk_correction_undoes_a_dmd_delay() {
             (0..w * h)
                 .map(|p| {
                     let (u, v) = ((p % w) as f64 / w as f64, (p / w) as f64 / h as f64);
-                    (2.0 + (tau * (2.0 * u + 0.3 * i as f64)).cos() + 0.5 * (tau * (3.0 * v - u)).sin())
-                        as f32
+                    (2.0 + (tau * (2.0 * u + 0.3 * i as f64)).cos()
+                        + 0.5 * (tau * (3.0 * v - u)).sin()) as f32
                 })
                 .collect()
         })
@@ -112,7 +138,9 @@ fn crosstalk_correction_undoes_a_dmd_delay() {
             delays(0.25)
         ));
         let (rig, _) = setup(&exp);
-        let wts = specmux::timing::weights(exp.rig.timing.as_ref().unwrap()).unwrap().w;
+        let wts = specmux::timing::weights(exp.rig.timing.as_ref().unwrap())
+            .unwrap()
+            .w;
         let mut y = vec![0f32; w * h];
         for (k, c) in rig.carriers.iter().enumerate() {
             let s = c.ideal_pattern(w, h);
@@ -122,7 +150,9 @@ fn crosstalk_correction_undoes_a_dmd_delay() {
             }
         }
         let r = Reconstructor::new(&exp, &rig, None).unwrap();
-        r.run(&Cube::from_vec(w, h, 1, y).unwrap(), None).unwrap().xhat
+        r.run(&Cube::from_vec(w, h, 1, y).unwrap(), None)
+            .unwrap()
+            .xhat
     };
     let truth: Vec<f32> = x.concat();
     let corrected = rel_rms(&xhat("timing").data, &truth);
@@ -156,12 +186,17 @@ fn raw_frames_are_calibrated_back_to_the_noiseless_frame() {
         let (st, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
         (st.frame.unwrap(), st.full_scale)
     };
-    let exp = experiment("[rig.sensor]\nfull_well_e = 200000\nbits = 16\nelectrons_at_full_scale = 50000\n");
+    let exp = experiment(
+        "[rig.sensor]\nfull_well_e = 200000\nbits = 16\nelectrons_at_full_scale = 50000\n",
+    );
     let (rig, m) = setup(&exp);
     let (st, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
     assert!(st.raw);
     let raw = st.frame.unwrap();
-    assert!(raw.data.iter().all(|v| v.fract() == 0.0), "raw frames hold integer DN");
+    assert!(
+        raw.data.iter().all(|v| v.fract() == 0.0),
+        "raw frames hold integer DN"
+    );
     let r = Reconstructor::new(&exp, &rig, None).unwrap();
     let cal = r.prepare(&raw).unwrap();
     let (y, fs) = noiseless;
@@ -173,5 +208,8 @@ fn raw_frames_are_calibrated_back_to_the_noiseless_frame() {
         / y.data.iter().map(|v| (*v as f64).powi(2)).sum::<f64>())
     .sqrt();
     let got = rel_rms(&cal.data, &y.data);
-    assert!(got < 1.5 * expected && got > 0.5 * expected, "{got} vs shot noise {expected}");
+    assert!(
+        got < 1.5 * expected && got > 0.5 * expected,
+        "{got} vs shot noise {expected}"
+    );
 }

@@ -159,7 +159,7 @@ impl Demux {
         }
         for (i, win) in self.windows.iter().enumerate() {
             let g = dft_at(patterns.plane(i), self.fft.w, self.fft.h, win.cx, win.cy);
-            if !(g.norm() > 1e-6) {
+            if g.norm().is_nan() || g.norm() <= 1e-6 {
                 return Err(Error::Numerical(format!(
                     "pattern {i} carries no energy at its carrier (amplitude {:.3e}); it cannot be demultiplexed",
                     g.norm()

@@ -85,7 +85,8 @@ impl Reconstructor {
         let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
         // The patterns GAP and the calibration work with: as given, else the design sinusoids
         // (computed only when one of them is asked for).
-        let needs_patterns = exp.reconstruct.gap.method != Method::Fourier || exp.rig.sensor.is_some();
+        let needs_patterns =
+            exp.reconstruct.gap.method != Method::Fourier || exp.rig.sensor.is_some();
         let ideal = (patterns.is_none() && needs_patterns)
             .then(|| Carrier::ideal_patterns(&rig.carriers, rig.width, rig.height));
         let s = patterns.or(ideal.as_ref());

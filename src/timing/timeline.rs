@@ -12,7 +12,6 @@ const WIDTH: u32 = 1500;
 const PANELS_HEIGHT: u32 = 560;
 const LINE: u32 = 22;
 
-
 /// Segment/pattern colour i of n (hue wheel, so any n works).
 fn colour(i: usize, n: usize) -> HSLColor {
     HSLColor(i as f64 / n as f64, 0.65, 0.55)
