@@ -182,3 +182,11 @@ fn a_timing_that_needs_a_faster_dmd_is_refused() {
     let (ok, err) = simulate(&d, toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.timing"]);
 }
+
+#[test]
+fn sensor_and_timing_must_agree_on_the_exposure() {
+    let d = tmpdir("exposure");
+    let toml = "[rig.timing.camera]\nexposure_s = 0.02\n[rig.sensor]\n";
+    let (ok, err) = simulate(&d, toml, None);
+    assert_one_line_error(ok, &err, &["exp.toml", "rig.sensor.exposure_s", "0.02"]);
+}

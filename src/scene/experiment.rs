@@ -389,6 +389,19 @@ impl Experiment {
         }
         if let Some(s) = &self.rig.sensor {
             s.validate(f)?;
+            if let Some(t) = &self.rig.timing {
+                if (s.exposure_s - t.camera.exposure_s).abs() > 1e-12 * t.camera.exposure_s {
+                    return Err(Error::config(
+                        f,
+                        "rig.sensor.exposure_s",
+                        s.exposure_s,
+                        &format!(
+                            "differs from rig.timing.camera.exposure_s = {}: one camera, one exposure",
+                            t.camera.exposure_s
+                        ),
+                    ));
+                }
+            }
         }
         if let Some(w) = &r.crosstalk_weights {
             if w.len() != n

@@ -47,8 +47,9 @@ pub struct SensorConfig {
     /// Dark-signal non-uniformity: standard deviation of the per-pixel offset map (e⁻).
     /// Default 2 e⁻: the usual order of DSNU1288 for CMOS machine-vision sensors.
     pub dsnu_e: f64,
-    /// Exposure time (s). Default 1/24 s: the prototype runs at 24 fps (paper, section 4); the
-    /// GO-5000 allows 10 µs–8 s.
+    /// Exposure time (s). Default 40 ms, the same as `[rig.timing].camera.exposure_s`: 40 whole
+    /// wheel turns, the longest that fits the prototype's 24 fps frame period (paper, section 4);
+    /// the GO-5000 allows 10 µs–8 s. With both sections present the two must agree.
     pub exposure_s: f64,
     /// Pixel pitch (µm), for the radiometric path. Default 5.0 µm: the GO-5000's 2560 × 2048
     /// pixels on a 1-inch (12.8 mm × 10.24 mm) sensor.
@@ -73,7 +74,7 @@ impl Default for SensorConfig {
             bits: 12,
             prnu_fraction: 0.01,
             dsnu_e: 2.0,
-            exposure_s: 1.0 / 24.0,
+            exposure_s: 0.040,
             pixel_pitch_um: 5.0,
             seed: 1288,
         }

@@ -350,7 +350,7 @@ fn band_cube_matches_the_curve_through_its_bands() {
     let mut bump = vec![0.0; 5];
     bump[2] = 0.02;
     let hat = Curve::from_grid("bump", &grid, bump).unwrap();
-    let extra = photo_electrons(&hat, &qe, 25e-12, 1.0 / 24.0).unwrap();
+    let extra = photo_electrons(&hat, &qe, 25e-12, SensorConfig::default().exposure_s).unwrap();
     assert!(((bands.data[4] - bands.data[0]) as f64 - extra).abs() < 1e-4 * extra);
     let wrong = Cube::zeros(3, 2, 4);
     assert!(sensor
