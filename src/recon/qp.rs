@@ -4,8 +4,9 @@
 //!
 //! The Hessian H = FᵀF + η BᵀD₂ᵀD₂B is the same for every pixel, so it is factored once per rig:
 //! the unconstrained cube is a fixed linear map r = P x̂ (P = B H⁻¹Fᵀ), and only the pixels where
-//! that map gives a negative band go through an exact primal active-set method. D₂ is taken in
-//! band-index units, so η carries the grid spacing (η_nm = η · Δλ⁴).
+//! that map gives a negative band go through an exact active-set method (Goldfarb–Idnani's dual
+//! method, `dual.rs`, which starts from that unconstrained solution). D₂ is taken in band-index
+//! units, so η carries the grid spacing (η_nm = η · Δλ⁴).
 
 // `!(x > y)` is deliberate: it is true for NaN too. The small dense kernels index by position.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
@@ -15,6 +16,8 @@ use crate::scene::Cube;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
+
+mod dual;
 
 /// Largest number of basis vectors J (stack arrays in the per-pixel solver).
 pub const MAX_BASIS: usize = 8;
@@ -26,9 +29,6 @@ pub const MAX_CHANNELS: usize = 16;
 pub const MAX_CONDITION: f64 = 1e12;
 /// Active-set iterations allowed per pixel before [`Unmixer::solve_pixel`] gives up.
 pub const MAX_ITERATIONS: usize = 500;
-/// Consecutive zero-length steps after which ties are broken by the smallest index (Bland's
-/// rule), which rules out cycling at degenerate vertices such as α = 0.
-const BLAND_AFTER: usize = 2 * MAX_BASIS;
 /// Rows of the image handled by one rayon task in [`Unmixer::unmix`].
 const ROWS_PER_CHUNK: usize = 8;
 
@@ -49,12 +49,13 @@ pub struct Unmixer {
     p32: Vec<f32>,
     /// B, row-major m × n.
     b: Vec<f64>,
-    /// Euclidean norm of each row of B (scales the ratio test).
-    b_norm: Vec<f64>,
-    /// Fᵀ, row-major n × c: the linear term g = Fᵀx̂.
-    ft: Vec<f64>,
-    /// A direction e with B e > 0 (max-normalised) if the basis has one, and B e.
-    interior: Option<(Vec<f64>, Vec<f64>)>,
+    /// The rows of B padded to MAX_BASIS with zeros (fixed-size kernels of the dual solver).
+    b8: Vec<[f64; MAX_BASIS]>,
+    /// 1/‖b_k‖ for each row of B (normalises the violation of band k; 0 for a zero row,
+    /// which no α can violate).
+    b_inv_norm: Vec<f64>,
+    /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the dual active set's starting factor.
+    linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
     condition: f64,
 }
 
@@ -146,6 +147,17 @@ impl Unmixer {
         let chol = nalgebra::Cholesky::new(h.clone())
             .ok_or_else(|| Error::Numerical("unmixing Hessian is not positive definite".into()))?;
         let mmat = chol.solve(&f.transpose()); // n × c
+        let linv = chol
+            .l()
+            .solve_lower_triangular(&DMatrix::identity(n, n))
+            .ok_or_else(|| Error::Numerical("unmixing Hessian factor is singular".into()))?;
+        // Column `col` of L⁻ᵀ is row `col` of L⁻¹.
+        let mut linv_t = [[0.0; MAX_BASIS]; MAX_BASIS];
+        for (col, column) in linv_t[..n].iter_mut().enumerate() {
+            for (row, v) in column[..n].iter_mut().enumerate() {
+                *v = linv[(col, row)];
+            }
+        }
         let p = b * &mmat; // m × c
         let row_major = |a: &DMatrix<f64>| -> Vec<f64> {
             (0..a.nrows())
@@ -160,9 +172,21 @@ impl Unmixer {
             mx: row_major(&mmat),
             p32: row_major(&p).iter().map(|&v| v as f32).collect(),
             b: row_major(b),
-            b_norm: b.row_iter().map(|row| row.norm()).collect(),
-            ft: row_major(&f.transpose()),
-            interior: interior_direction(b),
+            b8: b
+                .row_iter()
+                .map(|row| std::array::from_fn(|j| if j < n { row[j] } else { 0.0 }))
+                .collect(),
+            b_inv_norm: b
+                .row_iter()
+                .map(|row| {
+                    if row.norm() > 0.0 {
+                        1.0 / row.norm()
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+            linv_t,
             condition,
         })
     }
@@ -253,212 +277,8 @@ impl Unmixer {
             out_alpha.copy_from_slice(&au[..self.n]);
             return Ok(info);
         }
-        self.active_set(xhat, &au, &ru, out_alpha, &mut info)?;
+        self.dual_active_set(&au, &ru, out_alpha, &mut info)?;
         Ok(info)
-    }
-
-    /// Primal active-set method on min ½αᵀHα − gᵀα s.t. Bα ≥ 0 (g = Fᵀx̂). Each working set W is
-    /// solved by the null-space method: B_Wᵀ = [Q₁ Z]·[R; 0], α_W = Z (ZᵀHZ)⁻¹ Zᵀg and the
-    /// multipliers R λ = Q₁ᵀ(Hα_W − g); no product that squares a condition number is formed.
-    fn active_set(
-        &self,
-        xhat: &[f64],
-        au: &[f64; MAX_BASIS],
-        ru: &[f64; MAX_BANDS],
-        out_alpha: &mut [f64],
-        info: &mut SolveInfo,
-    ) -> Result<()> {
-        let (n, m) = (self.n, self.m);
-        let mut g = [0.0; MAX_BASIS];
-        for (i, gi) in g[..n].iter_mut().enumerate() {
-            *gi = self.ft[i * self.c..(i + 1) * self.c]
-                .iter()
-                .zip(xhat)
-                .map(|(f, x)| f * x)
-                .sum();
-        }
-        let scale = ru[..m].iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        let tol = 1e-12 * scale;
-        let mut alpha = [0.0; MAX_BASIS];
-        let mut r = [0.0; MAX_BANDS];
-        let mut in_w = [false; MAX_BANDS];
-        let mut w = [0usize; MAX_BASIS];
-        let mut nw = 0;
-        // Feasible start: α_unc + θe on the ray of an interior direction e (one active band), or 0.
-        if let Some((e, be)) = &self.interior {
-            let theta = (0..m).map(|k| -ru[k] / be[k]).fold(0.0f64, f64::max);
-            for i in 0..n {
-                alpha[i] = au[i] + theta * e[i];
-            }
-            for k in 0..m {
-                r[k] = (ru[k] + theta * be[k]).max(0.0);
-            }
-        }
-        let mut lam = [0.0; MAX_BASIS];
-        let mut aw = [0.0; MAX_BASIS];
-        let mut rw = [0.0; MAX_BANDS];
-        let mut degenerate_run = 0;
-        for iter in 1..=MAX_ITERATIONS {
-            info.iterations = iter;
-            if nw == 0 {
-                // The empty working set's minimiser is the unconstrained one, already known.
-                aw[..n].copy_from_slice(&au[..n]);
-                rw[..m].copy_from_slice(&ru[..m]);
-            } else {
-                self.equality_qp(&w[..nw], &g, &mut aw, &mut lam)?;
-                self.spectrum(&aw[..n], &mut rw);
-                for &k in &w[..nw] {
-                    rw[k] = 0.0;
-                }
-            }
-            // Ratio test along r → r_W (band values normalised by ‖b_k‖); ties at a degenerate
-            // vertex go to the band that falls fastest, or to the smallest index under Bland's rule.
-            let bland = degenerate_run >= BLAND_AFTER;
-            let mut t = 1.0;
-            let mut block: Option<(usize, f64)> = None;
-            if nw < n {
-                for k in 0..m {
-                    let d = (rw[k] - r[k]) / self.b_norm[k];
-                    if in_w[k] || d >= -tol {
-                        continue;
-                    }
-                    let tk = r[k].max(0.0) / self.b_norm[k] / -d;
-                    let better = match block {
-                        None => tk < t,
-                        Some((_, dbest)) => tk < t || (tk == t && !bland && d < dbest),
-                    };
-                    if better {
-                        t = tk;
-                        block = Some((k, d));
-                    }
-                }
-            }
-            if t >= 1.0 {
-                alpha[..n].copy_from_slice(&aw[..n]);
-                r[..m].copy_from_slice(&rw[..m]);
-            } else {
-                for i in 0..n {
-                    alpha[i] += t * (aw[i] - alpha[i]);
-                }
-                for k in 0..m {
-                    r[k] += t * (rw[k] - r[k]);
-                }
-            }
-            if let Some((k, _)) = block {
-                r[k] = 0.0;
-                in_w[k] = true;
-                w[nw] = k;
-                nw += 1;
-                degenerate_run = if t == 0.0 { degenerate_run + 1 } else { 0 };
-                continue;
-            }
-            // Full step: optimal if every multiplier is ≥ 0, else release one band.
-            let lmax = lam[..nw].iter().fold(0.0f64, |a, v| a.max(v.abs()));
-            let mut drop: Option<usize> = None;
-            for q in 0..nw {
-                if lam[q] < -1e-12 * lmax {
-                    let take = match drop {
-                        None => true,
-                        Some(p) if bland => w[q] < w[p],
-                        Some(p) => lam[q] < lam[p],
-                    };
-                    if take {
-                        drop = Some(q);
-                    }
-                }
-            }
-            match drop {
-                None => return self.finish(&alpha, &w[..nw], &lam, scale, out_alpha, info),
-                Some(q) => {
-                    in_w[w[q]] = false;
-                    w.copy_within(q + 1..nw, q);
-                    nw -= 1;
-                }
-            }
-        }
-        Err(Error::Numerical(format!(
-            "unmixing active set did not converge in {MAX_ITERATIONS} iterations"
-        )))
-    }
-
-    /// The minimiser of ½αᵀHα − gᵀα on B_W α = 0 and its multipliers, by the null-space method
-    /// with a Householder QR of B_Wᵀ (n × |W|).
-    fn equality_qp(
-        &self,
-        w: &[usize],
-        g: &[f64; MAX_BASIS],
-        aw: &mut [f64; MAX_BASIS],
-        lam: &mut [f64; MAX_BASIS],
-    ) -> Result<()> {
-        let (n, k) = (self.n, w.len());
-        // a = B_Wᵀ, reduced in place to R; q accumulates the reflections (columns of Q).
-        let mut a = [[0.0f64; MAX_BASIS]; MAX_BASIS];
-        for (j, &band) in w.iter().enumerate() {
-            for i in 0..n {
-                a[i][j] = self.b[band * n + i];
-            }
-        }
-        let mut q = [[0.0f64; MAX_BASIS]; MAX_BASIS];
-        for (i, row) in q[..n].iter_mut().enumerate() {
-            row[i] = 1.0;
-        }
-        for j in 0..k {
-            let norm = (j..n).map(|i| a[i][j] * a[i][j]).sum::<f64>().sqrt();
-            if !(norm > 1e-10 * self.b_norm[w[j]]) {
-                return Err(Error::Numerical(format!(
-                    "unmixing: bands {w:?} of the working set are linearly dependent"
-                )));
-            }
-            let mut v = [0.0f64; MAX_BASIS];
-            for i in j..n {
-                v[i] = a[i][j];
-            }
-            v[j] += if a[j][j] >= 0.0 { norm } else { -norm };
-            let vv: f64 = v[j..n].iter().map(|x| x * x).sum();
-            for col in j..k {
-                let s: f64 = (j..n).map(|i| v[i] * a[i][col]).sum::<f64>() * 2.0 / vv;
-                for i in j..n {
-                    a[i][col] -= s * v[i];
-                }
-            }
-            for row in q[..n].iter_mut() {
-                let s: f64 = (j..n).map(|i| row[i] * v[i]).sum::<f64>() * 2.0 / vv;
-                for i in j..n {
-                    row[i] -= s * v[i];
-                }
-            }
-        }
-        // Reduced Hessian ZᵀHZ (Z = columns k..n of q) by Cholesky, y = (ZᵀHZ)⁻¹ Zᵀg, α_W = Z y.
-        let nz = n - k;
-        let mut hz = [[0.0f64; MAX_BASIS]; MAX_BASIS];
-        let mut y = [0.0f64; MAX_BASIS];
-        for c1 in 0..nz {
-            let mut hcol = [0.0f64; MAX_BASIS];
-            for (i, hc) in hcol[..n].iter_mut().enumerate() {
-                *hc = (0..n).map(|l| self.h[i * n + l] * q[l][k + c1]).sum();
-            }
-            for c2 in c1..nz {
-                hz[c2][c1] = (0..n).map(|i| q[i][k + c2] * hcol[i]).sum();
-            }
-            y[c1] = (0..n).map(|i| q[i][k + c1] * g[i]).sum();
-        }
-        cholesky_solve(&mut hz, &mut y, nz)?;
-        for (i, ai) in aw[..n].iter_mut().enumerate() {
-            *ai = (0..nz).map(|c| q[i][k + c] * y[c]).sum();
-        }
-        // R λ = Q₁ᵀ(Hα_W − g).
-        let mut grad = [0.0f64; MAX_BASIS];
-        for (i, gr) in grad[..n].iter_mut().enumerate() {
-            *gr = (0..n).map(|l| self.h[i * n + l] * aw[l]).sum::<f64>() - g[i];
-        }
-        for j in 0..k {
-            lam[j] = (0..n).map(|i| q[i][j] * grad[i]).sum();
-        }
-        for j in (0..k).rev() {
-            let s: f64 = (j + 1..k).map(|l| a[j][l] * lam[l]).sum();
-            lam[j] = (lam[j] - s) / a[j][j];
-        }
-        Ok(())
     }
 
     fn finish(
@@ -608,36 +428,6 @@ impl Unmixer {
     }
 }
 
-/// Solve L Lᵀ y = rhs in place for the symmetric positive definite `a` (lower triangle used).
-fn cholesky_solve(
-    a: &mut [[f64; MAX_BASIS]; MAX_BASIS],
-    y: &mut [f64; MAX_BASIS],
-    n: usize,
-) -> Result<()> {
-    for i in 0..n {
-        for j in 0..=i {
-            let s = a[i][j] - (0..j).map(|k| a[i][k] * a[j][k]).sum::<f64>();
-            if i == j {
-                if !(s > 0.0) {
-                    return Err(Error::Numerical(
-                        "unmixing: reduced Hessian is not positive definite".into(),
-                    ));
-                }
-                a[i][i] = s.sqrt();
-            } else {
-                a[i][j] = s / a[j][j];
-            }
-        }
-    }
-    for i in 0..n {
-        y[i] = (y[i] - (0..i).map(|k| a[i][k] * y[k]).sum::<f64>()) / a[i][i];
-    }
-    for i in (0..n).rev() {
-        y[i] = (y[i] - (i + 1..n).map(|k| a[k][i] * y[k]).sum::<f64>()) / a[i][i];
-    }
-    Ok(())
-}
-
 /// True when every value is finite, by a lane-wise sum of `v − v` (0 for finite values, NaN
 /// otherwise) that the compiler can vectorise.
 #[allow(clippy::eq_op)]
@@ -651,21 +441,6 @@ fn all_finite(x: &[f32]) -> bool {
         }
     }
     lanes.iter().all(|&l| l == 0.0) && rest.iter().all(|v| v.is_finite())
-}
-
-/// A direction e with B e > 0, the least-squares fit of a flat spectrum, if it is one.
-fn interior_direction(b: &DMatrix<f64>) -> Option<(Vec<f64>, Vec<f64>)> {
-    let ones = nalgebra::DVector::from_element(b.nrows(), 1.0);
-    let e = b.clone().svd(true, true).solve(&ones, 1e-12).ok()?;
-    let be = b * &e;
-    let (lo, hi) = (be.min(), be.amax());
-    (lo > 1e-6 * hi).then(|| {
-        let s = 1.0 / hi;
-        (
-            e.iter().map(|v| v * s).collect(),
-            be.iter().map(|v| v * s).collect(),
-        )
-    })
 }
 
 #[cfg(test)]
