@@ -262,7 +262,8 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
     s
 }
 
-/// Final-cube PSNR against median run time, log time axis, one colour per method, the Pareto
+/// Final-cube PSNR against median run time, log time axis (ln t drawn linearly and labelled in
+/// seconds, so that the decade below 1 s gets labels too), one colour per method, the Pareto
 /// front as a line through its points.
 pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Result<()> {
     report::register_font();
@@ -293,12 +294,12 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(((t0 / 1.3)..(t1 * 1.3)).log_scale(), (p0 - pad)..(p1 + pad))
+            .build_cartesian_2d((t0 / 1.3).ln()..(t1 * 1.3).ln(), (p0 - pad)..(p1 + pad))
             .map_err(|e| err(e.to_string()))?;
         chart
             .configure_mesh()
             .x_labels(12)
-            .x_label_formatter(&|v| format!("{v:.3}"))
+            .x_label_formatter(&|v| format!("{:.3}", v.exp()))
             .x_desc("median wall time of demultiplex + de-alias + unmix, s (log)")
             .y_desc("final cube PSNR, dB")
             .draw()
@@ -312,7 +313,7 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
             let pts: Vec<(f64, f64)> = ok
                 .iter()
                 .filter(|r| r.setting.method == method)
-                .map(|r| (r.seconds, r.psnr_db))
+                .map(|r| (r.seconds.ln(), r.psnr_db))
                 .collect();
             chart
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 5, color.filled())))
@@ -323,7 +324,7 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
         let mut front: Vec<(f64, f64)> = ok
             .iter()
             .filter(|r| r.pareto)
-            .map(|r| (r.seconds, r.psnr_db))
+            .map(|r| (r.seconds.ln(), r.psnr_db))
             .collect();
         front.sort_by(|a, b| a.0.total_cmp(&b.0));
         chart

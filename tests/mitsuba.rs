@@ -6,21 +6,13 @@
 use specmux::optics::wheel::ColorWheel;
 use specmux::recon::Reconstructor;
 use specmux::rig::Rig;
+use specmux::scene::experiment::WheelConfig;
 use specmux::scene::mitsuba::{self, WHEEL_CHANNELS};
 use specmux::scene::{Cube, Experiment, Materials};
 use specmux::spectral::{integrate_product, Curve, Grid, Library};
 use std::path::{Path, PathBuf};
 
 const SCENES: [&str; 3] = ["chart", "cornell", "strips"];
-/// Curves of the wheel channels, in the order of `WHEEL_CHANNELS`.
-const FILTERS: [&str; 6] = [
-    "wheel/red",
-    "wheel/green",
-    "wheel/blue",
-    "paper/a",
-    "paper/b",
-    "paper/c",
-];
 /// A difference is within the Monte Carlo noise if it is under this many standard errors.
 const SIGMAS: f64 = 5.0;
 /// Largest relative difference accepted whatever the noise.
@@ -49,7 +41,12 @@ fn fixture(scene: &str) -> (Cube, Cube) {
 
 fn curves() -> (Vec<Curve>, Curve) {
     let lib = Library::new(root().join("spectra"));
-    let filters = FILTERS.iter().map(|n| lib.curve(n).unwrap()).collect();
+    // The renders' wheel channels are the prototype's filters, in the order of `WHEEL_CHANNELS`.
+    let filters = WheelConfig::default()
+        .filters
+        .iter()
+        .map(|n| lib.curve(n).unwrap())
+        .collect();
     (filters, lib.curve("camera/mono_qe").unwrap())
 }
 

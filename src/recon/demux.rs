@@ -277,30 +277,11 @@ mod tests {
     #[test]
     fn band_limited_channels_are_recovered_exactly() {
         let (w, h) = (64, 64);
-        let carriers: Vec<Carrier> = default_layout()
-            .into_iter()
-            .enumerate()
-            .map(|(i, c)| Carrier {
-                phase_rad: 0.4 * i as f64,
-                ..c
-            })
-            .collect();
         let xs: Vec<Vec<f32>> = (0..6).map(|i| smooth(w, h, i as f64)).collect();
-        let mut y = vec![0.0f32; w * h];
-        for (x, c) in xs.iter().zip(&carriers) {
-            for (yy, (xv, sv)) in y.iter_mut().zip(x.iter().zip(c.ideal_pattern(w, h))) {
-                *yy += xv * sv;
-            }
-        }
-        let d = Demux::new(w, h, &carriers, 0.25);
-        let out = d.run(&Cube::from_vec(w, h, 1, y).unwrap()).unwrap();
+        let (carriers, y) = multiplex(&xs, w, h);
+        let out = Demux::new(w, h, &carriers, 0.25).run(&y).unwrap();
         for (i, x) in xs.iter().enumerate() {
-            let err = out
-                .plane(i)
-                .iter()
-                .zip(x)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f32::max);
+            let err = max_diff(out.plane(i), x);
             assert!(err < 1e-4, "channel {i}: {err}");
         }
     }
