@@ -61,8 +61,6 @@ pub struct Reconstructor {
     /// GAP de-aliasing on the patterns (given, else the ideal ones); None for `method = "fourier"`.
     pub gap: Option<Gap>,
     pub unmixer: Unmixer,
-    /// Per-band gains L̃ of a radiance scene's light (`Rig::light_gains`): r̂ = diag(L̃)·Bα.
-    pub light: Option<Vec<f32>>,
     /// The exposure weights w_ik (filter i, pattern k) the frame was taken with, if modelled.
     pub weights: Option<Vec<Vec<f64>>>,
     /// M = (Wᵀ)⁻¹: x_i = Σ_k M_ik z_k undoes the exposure crosstalk (None: not corrected).
@@ -82,7 +80,11 @@ impl Reconstructor {
         }
         // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
         let eta = exp.reconstruct.eta / rig.grid.step_nm.powi(4);
-        let unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
+        let mut unmixer = Unmixer::new(&rig.system_matrix(), &rig.basis.vectors, eta)?;
+        // A lit radiance scene: the cube is diag(L̃)·Bα (`Rig::light_gains`).
+        if let Some(light) = rig.light_gains() {
+            unmixer = unmixer.with_output_gains(&light)?;
+        }
         // The patterns GAP and the calibration work with: as given, else the design sinusoids
         // (computed only when one of them is asked for).
         let needs_patterns =
@@ -94,9 +96,6 @@ impl Reconstructor {
             (Method::Fourier, _) | (_, None) => None,
             (_, Some(s)) => Some(Gap::new(s, &exp.reconstruct.gap, &exp.file)?),
         };
-        let light = rig
-            .light_gains()
-            .map(|g| g.iter().map(|&v| v as f32).collect());
         let r = &exp.reconstruct;
         let weights = match (&r.crosstalk_weights, &exp.rig.timing) {
             (Some(w), _) => Some(w.clone()),
@@ -127,7 +126,6 @@ impl Reconstructor {
             demux,
             gap,
             unmixer,
-            light,
             weights,
             demix,
             calibration,
@@ -185,10 +183,6 @@ impl Reconstructor {
 
     /// r̂ = B α per pixel, non-negative (times the light gains L̃ for a lit radiance scene).
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
-        let (mut cube, stats) = self.unmixer.unmix(xhat)?;
-        for (plane, g) in cube.planes_mut().zip(self.light.iter().flatten()) {
-            plane.iter_mut().for_each(|v| *v *= g);
-        }
-        Ok((cube, stats))
+        self.unmixer.unmix(xhat)
     }
 }

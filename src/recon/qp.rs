@@ -45,10 +45,13 @@ pub struct Unmixer {
     h: Vec<f64>,
     /// M = H⁻¹Fᵀ, row-major n × c: α_unc = M x̂.
     mx: Vec<f64>,
-    /// P = B M, row-major m × c, in f32 for the batched fast path.
+    /// diag(gain)·P, P = B M, row-major m × c, in f32 for the batched fast path.
     p32: Vec<f32>,
-    /// B, row-major m × n.
-    b: Vec<f64>,
+    /// Per-band output gains (all 1 unless set by [`Unmixer::with_output_gains`]).
+    gain: Vec<f64>,
+    /// B by columns: `bt[j][k]` = basis vector j at band k (the spectrum Bα as a sum of
+    /// scaled columns, which vectorises over the bands).
+    bt: Vec<[f64; MAX_BANDS]>,
     /// The rows of B padded to MAX_BASIS with zeros (fixed-size kernels of the dual solver).
     b8: Vec<[f64; MAX_BASIS]>,
     /// 1/‖b_k‖ for each row of B (normalises the violation of band k; 0 for a zero row,
@@ -171,7 +174,11 @@ impl Unmixer {
             h: row_major(&h),
             mx: row_major(&mmat),
             p32: row_major(&p).iter().map(|&v| v as f32).collect(),
-            b: row_major(b),
+            gain: vec![1.0; m],
+            bt: b
+                .column_iter()
+                .map(|col| std::array::from_fn(|k| if k < m { col[k] } else { 0.0 }))
+                .collect(),
             b8: b
                 .row_iter()
                 .map(|row| std::array::from_fn(|j| if j < n { row[j] } else { 0.0 }))
@@ -208,6 +215,33 @@ impl Unmixer {
         self.condition
     }
 
+    /// Write diag(gains)·Bα instead of Bα (the light of a radiance scene, `Rig::light_gains`),
+    /// in the same pass. The gains must be finite and > 0, so the constraint Bα ≥ 0 is unchanged.
+    pub fn with_output_gains(mut self, gains: &[f64]) -> Result<Unmixer> {
+        if gains.len() != self.m {
+            return Err(Error::Shape(format!(
+                "{} output gains for {} bands",
+                gains.len(),
+                self.m
+            )));
+        }
+        if let Some((k, g)) = gains
+            .iter()
+            .enumerate()
+            .find(|(_, g)| !(g.is_finite() && **g > 0.0))
+        {
+            return Err(Error::Numerical(format!(
+                "output gain of band {k} is {g}; it must be finite and > 0"
+            )));
+        }
+        for ((row, &g), &g0) in self.p32.chunks_exact_mut(self.c).zip(gains).zip(&self.gain) {
+            row.iter_mut()
+                .for_each(|v| *v = (*v as f64 / g0 * g) as f32);
+        }
+        self.gain = gains.to_vec();
+        Ok(self)
+    }
+
     /// The objective ½αᵀHα − (Fᵀx̂)ᵀα, written with M: Fᵀx̂ = H M x̂. It equals half of
     /// ‖x̂ − Fα‖² + η‖D₂Bα‖² − ‖x̂‖².
     pub fn objective(&self, xhat: &[f64], alpha: &[f64]) -> f64 {
@@ -235,14 +269,13 @@ impl Unmixer {
         a
     }
 
+    /// r = Bα on the bands.
     fn spectrum(&self, alpha: &[f64], r: &mut [f64; MAX_BANDS]) {
-        let n = self.n;
-        for (k, rk) in r[..self.m].iter_mut().enumerate() {
-            *rk = self.b[k * n..(k + 1) * n]
-                .iter()
-                .zip(alpha)
-                .map(|(b, a)| b * a)
-                .sum();
+        r.fill(0.0);
+        for (col, &a) in self.bt.iter().zip(alpha) {
+            for (rk, bk) in r[..self.m].iter_mut().zip(col) {
+                *rk += bk * a;
+            }
         }
     }
 
@@ -264,34 +297,44 @@ impl Unmixer {
                 xhat[k]
             )));
         }
+        let mut r = [0.0; MAX_BANDS];
+        self.solve(xhat, out_alpha, &mut r)
+    }
+
+    /// [`Unmixer::solve_pixel`] on checked input, also writing the band values r = Bα.
+    fn solve(
+        &self,
+        xhat: &[f64],
+        out_alpha: &mut [f64],
+        r: &mut [f64; MAX_BANDS],
+    ) -> Result<SolveInfo> {
         let au = self.unconstrained_alpha(xhat);
-        let mut ru = [0.0; MAX_BANDS];
-        self.spectrum(&au[..self.n], &mut ru);
+        self.spectrum(&au[..self.n], r);
         let mut info = SolveInfo {
             iterations: 0,
             active: 0,
             bands: [0; MAX_BASIS],
             multipliers: [0.0; MAX_BASIS],
         };
-        if ru[..self.m].iter().all(|&v| v >= 0.0) {
+        if r[..self.m].iter().all(|&v| v >= 0.0) {
             out_alpha.copy_from_slice(&au[..self.n]);
             return Ok(info);
         }
-        self.dual_active_set(&au, &ru, out_alpha, &mut info)?;
+        self.dual_active_set(&au, r, out_alpha, &mut info)?;
         Ok(info)
     }
 
+    /// Accept the active set's result: α finite and every band r = Bα ≥ −1e-9·scale.
     fn finish(
         &self,
         alpha: &[f64; MAX_BASIS],
+        r: &[f64; MAX_BANDS],
         w: &[usize],
         lam: &[f64; MAX_BASIS],
         scale: f64,
         out_alpha: &mut [f64],
         info: &mut SolveInfo,
     ) -> Result<()> {
-        let mut r = [0.0; MAX_BANDS];
-        self.spectrum(&alpha[..self.n], &mut r);
         let worst = r[..self.m].iter().cloned().fold(0.0f64, f64::min);
         if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
@@ -309,16 +352,29 @@ impl Unmixer {
     /// Bands of solved pixels are B α with the round-off left by the solver (≤ 1e-9 of the
     /// pixel's scale, checked) set to zero, so every output value is ≥ 0.
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
+        let mut out = Cube::zeros(xhat.width, xhat.height, self.m);
+        let stats = self.unmix_into(xhat, &mut out)?;
+        Ok((out, stats))
+    }
+
+    /// [`Unmixer::unmix`] into a cube of the right size that the caller keeps from frame to
+    /// frame: a real-time loop then pays for its 31 output planes' memory once.
+    pub fn unmix_into(&self, xhat: &Cube, out: &mut Cube) -> Result<UnmixStats> {
         if xhat.planes != self.c {
             return Err(Error::Shape(format!(
                 "unmixing expects {} channel planes, the cube has {}",
                 self.c, xhat.planes
             )));
         }
+        if (out.width, out.height, out.planes) != (xhat.width, xhat.height, self.m) {
+            return Err(Error::Shape(format!(
+                "unmixing output {}×{}×{} for channels {}×{} and {} bands",
+                out.width, out.height, out.planes, xhat.width, xhat.height, self.m
+            )));
+        }
         let (wid, npx) = (xhat.width, xhat.pixels());
-        let mut out = Cube::zeros(xhat.width, xhat.height, self.m);
         if npx == 0 {
-            return Ok((out, UnmixStats::default()));
+            return Ok(UnmixStats::default());
         }
         let chunk_px = ROWS_PER_CHUNK * wid;
         let nchunks = npx.div_ceil(chunk_px);
@@ -329,7 +385,7 @@ impl Unmixer {
                 views[k].push(part);
             }
         }
-        let stats = views
+        views
             .into_par_iter()
             .enumerate()
             .map_init(
@@ -363,8 +419,7 @@ impl Unmixer {
                     max_iterations: a.max_iterations.max(b.max_iterations),
                     total_iterations: a.total_iterations + b.total_iterations,
                 })
-            })?;
-        Ok((out, stats))
+            })
     }
 
     /// One chunk: r = P x̂ band by band (plane-major, vectorisable), then the exact solver on the
@@ -383,19 +438,28 @@ impl Unmixer {
                 return Err((i, format!("channel {j} is {}", x[i])));
             }
         }
+        // Each band in blocks of BLOCK pixels accumulated in a local buffer: one store per
+        // value, the channel planes read from cache.
+        const BLOCK: usize = 64;
         minr.fill(f32::INFINITY);
         for (bnd, out) in bands.iter_mut().enumerate() {
             let p = &self.p32[bnd * c..(bnd + 1) * c];
-            for (o, &x) in out.iter_mut().zip(xs[0]) {
-                *o = p[0] * x;
-            }
-            for (&pj, x) in p[1..].iter().zip(&xs[1..]) {
-                for (o, &x) in out.iter_mut().zip(*x) {
-                    *o += pj * x;
+            for start in (0..out.len()).step_by(BLOCK) {
+                let end = (start + BLOCK).min(out.len());
+                let mut acc = [0.0f32; BLOCK];
+                let acc = &mut acc[..end - start];
+                for (a, &x) in acc.iter_mut().zip(&xs[0][start..end]) {
+                    *a = p[0] * x;
                 }
-            }
-            for (mn, &o) in minr.iter_mut().zip(out.iter()) {
-                *mn = mn.min(o);
+                for (&pj, x) in p[1..].iter().zip(&xs[1..]) {
+                    for (a, &x) in acc.iter_mut().zip(&x[start..end]) {
+                        *a += pj * x;
+                    }
+                }
+                out[start..end].copy_from_slice(acc);
+                for (mn, &a) in minr[start..end].iter_mut().zip(acc.iter()) {
+                    *mn = mn.min(a);
+                }
             }
         }
         let mut stats = UnmixStats {
@@ -413,11 +477,10 @@ impl Unmixer {
                 *xv = x[i] as f64;
             }
             let info = self
-                .solve_pixel(&xp[..c], &mut alpha[..self.n])
+                .solve(&xp[..c], &mut alpha[..self.n], &mut r)
                 .map_err(|e| (i, e.to_string()))?;
-            self.spectrum(&alpha[..self.n], &mut r);
-            for (out, &v) in bands.iter_mut().zip(&r[..self.m]) {
-                out[i] = v.max(0.0) as f32;
+            for ((out, &v), g) in bands.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
+                out[i] = (v.max(0.0) * g) as f32;
             }
             stats.constrained_pixels += 1;
             stats.bound_pixels += (info.active > 0) as usize;

@@ -21,7 +21,8 @@ fn dot(a: &Vector, b: &Vector) -> f64 {
 /// The Givens rotation (c, s, h) that takes (x, y) to (h, 0).
 fn givens(x: f64, y: f64) -> Option<(f64, f64, f64)> {
     let h = (x * x + y * y).sqrt();
-    (h > 0.0).then(|| (x / h, y / h, h))
+    let inv = 1.0 / h;
+    (h > 0.0).then_some((x * inv, y * inv, h))
 }
 
 /// Rotate columns `a` and `b` of the column-major `m` by (c, s): a ← c·a + s·b, b ← c·b − s·a.
@@ -92,17 +93,18 @@ impl State {
 }
 
 impl Unmixer {
-    /// Goldfarb–Idnani from the unconstrained minimiser `au` with band values `ru`; writes α and
-    /// the final working set and multipliers (Hα − g = Σ μ_k b_kᵀ, μ ≥ 0).
+    /// Goldfarb–Idnani from the unconstrained minimiser `au` whose band values are in `s`;
+    /// writes α, the final band values Bα to `s`, and the final working set and multipliers
+    /// (Hα − g = Σ μ_k b_kᵀ, μ ≥ 0).
     pub(super) fn dual_active_set(
         &self,
         au: &[f64; MAX_BASIS],
-        ru: &[f64; MAX_BANDS],
+        s: &mut [f64; MAX_BANDS],
         out_alpha: &mut [f64],
         info: &mut SolveInfo,
     ) -> Result<()> {
         let (n, m) = (self.n, self.m);
-        let scale = ru[..m].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let scale = s[..m].iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = 1e-12 * scale;
         let mut st = State {
             j: self.linv_t,
@@ -112,7 +114,6 @@ impl Unmixer {
             q: 0,
         };
         let mut alpha = *au;
-        let mut s = *ru;
         let mut in_w = [false; MAX_BANDS];
         let mut iterations = 0;
         loop {
@@ -205,11 +206,9 @@ impl Unmixer {
                     }
                 }
             }
-            for (sk, bk) in s[..m].iter_mut().zip(&self.b8) {
-                *sk = dot(bk, &alpha);
-            }
+            self.spectrum(&alpha, s);
         }
         info.iterations = iterations;
-        self.finish(&alpha, &st.active[..st.q], &st.u, scale, out_alpha, info)
+        self.finish(&alpha, s, &st.active[..st.q], &st.u, scale, out_alpha, info)
     }
 }
