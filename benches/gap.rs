@@ -23,8 +23,8 @@ fn case() -> (Cube, Cube, Cube, Cube) {
         .map(|_| std::array::from_fn(|_| rng.gen_range(0.05..1.0)))
         .collect();
     let mut x = Cube::zeros(N, N, 6);
-    for k in 0..6 {
-        for (v, &l) in x.plane_mut(k).iter_mut().zip(&labels) {
+    for (k, plane) in x.planes_mut().enumerate() {
+        for (v, &l) in plane.iter_mut().zip(&labels) {
             *v = spectra[l as usize][k];
         }
     }

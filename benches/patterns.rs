@@ -1,22 +1,38 @@
 //! Generating and imaging the six 768 × 768 patterns of the prototype rig (done once per rig):
-//! Floyd–Steinberg and in-band-feedback dithering, coherent 4f filtering, lens and pixels.
+//! Floyd–Steinberg and in-band-feedback dithering, coherent 4f filtering of each wheel band
+//! (streaks, exact over λ) and of a 532 nm line, lens and pixels.
 use criterion::{criterion_group, criterion_main, Criterion};
-use specmux::optics::carriers::default_layout;
 use specmux::optics::dither::DitherMethod;
+use specmux::optics::fourier_filter::Light;
 use specmux::optics::imaging::{imaged_patterns, OpticsConfig};
+use specmux::rig::Rig;
+use specmux::scene::{Experiment, Materials};
+use specmux::spectral::Library;
 
 fn patterns(c: &mut Criterion) {
-    let carriers = default_layout();
+    let lib = Library::default_root();
+    let materials = Materials::load(&lib).expect("spectra/ is readable");
+    let rig = Rig::build(&Experiment::prototype(), &lib, &materials).expect("prototype rig");
+    let spectra = rig.pattern_spectra().unwrap();
     let mut g = c.benchmark_group("patterns");
     g.sample_size(10);
-    for m in [DitherMethod::FloydSteinberg, DitherMethod::InBandFeedback] {
+    for (m, light) in [
+        (DitherMethod::FloydSteinberg, Light::Channel),
+        (DitherMethod::InBandFeedback, Light::Channel),
+        (DitherMethod::FloydSteinberg, Light::Line),
+    ] {
         let mut cfg = OpticsConfig::prototype();
         if let Some(d) = cfg.dmd.as_mut() {
             d.dither = m;
         }
-        g.bench_function(format!("six_768_{}_coherent", m.name()), |b| {
-            b.iter(|| imaged_patterns(&cfg, &carriers, 768, 768).unwrap())
-        });
+        if let Some(f) = cfg.fourier_filter.as_mut() {
+            f.light = light;
+        }
+        let lights = cfg.pattern_lights(&spectra).unwrap();
+        g.bench_function(
+            format!("six_768_{}_coherent_{light:?}", m.name()).to_lowercase(),
+            |b| b.iter(|| imaged_patterns(&cfg, &rig.carriers, &lights, 768, 768).unwrap()),
+        );
     }
     g.finish();
 }

@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::optics::imaging::{self, OpticsConfig};
+use crate::optics::light::PatternLight;
 use crate::optics::Carrier;
 use crate::rig::Rig;
 use crate::scene::{self, Cube, Experiment, Materials, Quantity, Scene};
@@ -165,6 +166,7 @@ impl Stage for IdealPatternStage {
 struct ImagedPatternStage {
     optics: OpticsConfig,
     carriers: Vec<Carrier>,
+    lights: Vec<PatternLight>,
     width: usize,
     height: usize,
 }
@@ -180,6 +182,7 @@ impl Stage for ImagedPatternStage {
         st.patterns = Some(imaging::imaged_patterns(
             &self.optics,
             &self.carriers,
+            &self.lights,
             self.width,
             self.height,
         )?);
@@ -310,7 +313,9 @@ pub fn patterns_for(exp: &Experiment, rig: &Rig) -> Result<Option<Cube>> {
     if !exp.rig.has_optics() {
         return Ok(None);
     }
-    imaging::imaged_patterns(&exp.rig.optics(), &rig.carriers, rig.width, rig.height).map(Some)
+    let optics = exp.rig.optics();
+    let lights = optics.pattern_lights(&rig.pattern_spectra()?)?;
+    imaging::imaged_patterns(&optics, &rig.carriers, &lights, rig.width, rig.height).map(Some)
 }
 
 /// The camera: electrons = frame × electrons_at_full_scale / full scale, then the EMVA 1288
@@ -377,8 +382,10 @@ impl Pipeline {
             }),
         ];
         stages.push(if exp.rig.has_optics() {
+            let optics = exp.rig.optics();
             Box::new(ImagedPatternStage {
-                optics: exp.rig.optics(),
+                lights: optics.pattern_lights(&rig.pattern_spectra()?)?,
+                optics,
                 carriers: rig.carriers.clone(),
                 width: rig.width,
                 height: rig.height,

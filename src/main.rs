@@ -99,6 +99,10 @@ enum Command {
         out: PathBuf,
         #[arg(long)]
         size: Option<usize>,
+        /// Dithering study instead: every dither × illumination at these pinhole radii (µm,
+        /// comma-separated), the experiment's other optics kept (study.md, study.json).
+        #[arg(long, value_delimiter = ',')]
+        study: Option<Vec<f64>>,
     },
     /// Timing report: the weight matrix w_ik of one exposure, the operator's warnings and a
     /// timeline PNG (wheel segment, pattern shown, exposure window).
@@ -190,7 +194,8 @@ fn dispatch(cmd: Command, lib: &Library) -> Result<()> {
             experiment,
             out,
             size,
-        } => patterns(&experiment, &out, size, lib),
+            study,
+        } => patterns(&experiment, &out, size, study.as_deref(), lib),
         Command::Timing { experiment, out } => timing(&experiment, &out),
         Command::Ptc {
             experiment,
@@ -372,13 +377,45 @@ fn sweep(
     Ok(())
 }
 
-fn patterns(scene: &str, out: &Path, size: Option<usize>, lib: &Library) -> Result<()> {
+fn patterns(
+    scene: &str,
+    out: &Path,
+    size: Option<usize>,
+    study: Option<&[f64]>,
+    lib: &Library,
+) -> Result<()> {
+    use specmux::optics::pattern_report as pr;
     let exp = experiment_for(scene, size)?;
     let materials = specmux::scene::Materials::load(lib)?;
     let rig = specmux::rig::Rig::build(&exp, lib, &materials)?;
-    let (rep, set) = specmux::optics::pattern_report::pattern_report(
-        &exp.rig.optics(),
+    let optics = exp.rig.optics();
+    let lights = optics.pattern_lights(&rig.pattern_spectra()?)?;
+    if let Some(radii) = study {
+        let t = std::time::Instant::now();
+        let rows = pr::dither_study(
+            &optics,
+            &rig.carriers,
+            &lights,
+            rig.width,
+            rig.height,
+            exp.reconstruct.crop,
+            radii,
+        )?;
+        let md = pr::study_table(&rows);
+        say!(
+            "{md}\n{} runs in {:.1} s",
+            rows.len(),
+            t.elapsed().as_secs_f64()
+        );
+        specmux::atomic::write_bytes(&out.join("study.md"), md.as_bytes())?;
+        report::write_json(&out.join("study.json"), &rows)?;
+        say!("wrote {}", out.display());
+        return Ok(());
+    }
+    let (rep, set) = pr::pattern_report(
+        &optics,
         &rig.carriers,
+        &lights,
         rig.width,
         rig.height,
         exp.reconstruct.crop,
@@ -424,7 +461,7 @@ fn patterns(scene: &str, out: &Path, size: Option<usize>, lib: &Library) -> Resu
         let row: Vec<String> = c.crosstalk.iter().map(|v| format!("{v:9.2e}")).collect();
         say!("{}", row.join(" "));
     }
-    specmux::optics::pattern_report::write_pattern_pngs(&set, out)?;
+    pr::write_pattern_pngs(&set, out)?;
     report::write_json(&out.join("patterns.json"), &rep)?;
     say!("wrote {}", out.display());
     Ok(())

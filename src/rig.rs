@@ -74,6 +74,29 @@ impl Rig {
         })
     }
 
+    /// The light of each wheel channel as the camera weighs it on a flat reflector, T_i·L·QE,
+    /// sampled every nanometre (or finer) over the cube's wavelengths; L is the radiance scene's
+    /// light, flat without one. Pattern i is formed by this light (optics/light.rs).
+    pub fn pattern_spectra(&self) -> Result<Vec<Curve>> {
+        let (lo, hi) = (self.grid.start_nm, self.grid.end_nm());
+        let n = (hi - lo).ceil().max(1.0) as usize + 1;
+        let wl: Vec<f64> = (0..n)
+            .map(|k| lo + (hi - lo) * k as f64 / (n - 1) as f64)
+            .collect();
+        let light = self.illuminant.as_ref().or(self.radiance_light.as_ref());
+        self.wheel
+            .filters
+            .iter()
+            .map(|t| {
+                let v = wl
+                    .iter()
+                    .map(|&l| t.eval(l) * self.qe.eval(l) * light.map_or(1.0, |c| c.eval(l)))
+                    .collect();
+                Curve::new(format!("{} light", t.name), wl.clone(), v)
+            })
+            .collect()
+    }
+
     /// For a radiance scene lit by L: L at the band centres divided by its mean over the bands
     /// (unit mean, so that η weighs the reflectance curvature as in a reflectance scene); None
     /// otherwise. The reconstruction solves for the reflectance-like Bα and returns diag(L̃)·Bα.

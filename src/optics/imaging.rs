@@ -13,13 +13,16 @@
 use super::carriers::Carrier;
 use super::dither::signed_bin;
 use super::dmd::DmdConfig;
-use super::fourier_filter::{pupil_otf, FourierFilterConfig, Illumination, Mask};
+use super::fourier_filter::{FourierFilterConfig, Illumination, Light, Mask};
+use super::light::PatternLight;
 use super::psf::LensConfig;
+use super::relay::{pair_sums, passed_bins};
 use crate::error::{Error, Result};
 use crate::recon::fft2::Fft2;
 use crate::scene::Cube;
+use crate::spectral::Curve;
 use rayon::prelude::*;
-use rustfft::num_complex::Complex32;
+use rustfft::num_complex::{Complex32, Complex64};
 use serde::{Deserialize, Serialize};
 
 /// An opening must span at least this many frequency bins in radius, else the grid is refined.
@@ -64,6 +67,17 @@ impl OpticsConfig {
         Ok(())
     }
 
+    /// The light of each pattern: a line for every pattern with `light = "line"`, else the
+    /// pattern's own band, `spectra[i]` (T_i·L·QE of its wheel segment).
+    pub fn pattern_lights(&self, spectra: &[Curve]) -> Result<Vec<PatternLight>> {
+        match &self.fourier_filter {
+            Some(f) if f.light == Light::Line => {
+                Ok(vec![PatternLight::Line(f.wavelength_nm); spectra.len()])
+            }
+            _ => spectra.iter().map(PatternLight::band).collect(),
+        }
+    }
+
     /// The DMD, or without one an ideal grey modulator (fill 1) covering the sensor's field.
     fn modulator(&self, w: usize, h: usize) -> DmdConfig {
         self.dmd.clone().unwrap_or_else(|| {
@@ -102,16 +116,20 @@ pub fn stage_names(cfg: &OpticsConfig, sensor_w: usize, sensor_h: usize) -> Vec<
         None => out.push("patterns: ideal grey sinusoids 1 + cos(ω·p + φ)".into()),
     }
     if let Some(f) = &cfg.fourier_filter {
+        let light = match f.light {
+            Light::Channel => "each pattern's wheel band, exact over λ".to_string(),
+            Light::Line => format!("a {} nm line", f.wavelength_nm),
+        };
         out.push(format!(
-            "fourier-filter: {:?} light at {} nm, f = {} mm, {:?} openings of {} µm ({:.4} cycles/mirror) at 0, ±ω",
-            f.illumination, f.wavelength_nm, f.focal_length_mm, f.shape, f.pinhole_radius_um,
-            f.cycles_per_mirror(f.pinhole_radius_um, m.pitch_um)
+            "fourier-filter: {:?} light, {light}, f = {} mm, {:?} openings of {} µm ({:.4} cycles/mirror at 550 nm) at 0, ±ω",
+            f.illumination, f.focal_length_mm, f.shape, f.pinhole_radius_um,
+            f.cycles_per_mirror(f.pinhole_radius_um, m.pitch_um, 550.0)
         ));
     }
     if let Some(l) = &cfg.lens {
         out.push(format!(
-            "lens: NA {} Airy OTF at {} nm, magnification {}, {:.3} sensor pixels per mirror, pixel integration",
-            l.na, l.wavelength_nm, l.magnification, l.sensor_pixels_per_mirror(m.pitch_um)
+            "lens: NA {} Airy OTF over each pattern's light, magnification {}, {:.3} sensor pixels per mirror, pixel integration",
+            l.na, l.magnification, l.sensor_pixels_per_mirror(m.pitch_um)
         ));
     }
     out
@@ -135,21 +153,23 @@ pub struct PatternSet {
     pub grid: Vec<(usize, usize)>,
 }
 
-/// s̃_i, one plane per carrier at `sensor_w × sensor_h`. With every stage absent this is exactly
-/// `Carrier::ideal_pattern`.
+/// s̃_i, one plane per carrier at `sensor_w × sensor_h`, pattern i formed by `lights[i]`. With
+/// every stage absent this is exactly `Carrier::ideal_pattern`.
 pub fn imaged_patterns(
     cfg: &OpticsConfig,
     carriers: &[Carrier],
+    lights: &[PatternLight],
     sensor_w: usize,
     sensor_h: usize,
 ) -> Result<Cube> {
-    Ok(simulate_patterns(cfg, carriers, sensor_w, sensor_h)?.imaged)
+    Ok(simulate_patterns(cfg, carriers, lights, sensor_w, sensor_h)?.imaged)
 }
 
 /// The whole computation behind [`imaged_patterns`].
 pub fn simulate_patterns(
     cfg: &OpticsConfig,
     carriers: &[Carrier],
+    lights: &[PatternLight],
     w: usize,
     h: usize,
 ) -> Result<PatternSet> {
@@ -158,6 +178,12 @@ pub fn simulate_patterns(
         return Err(Error::Shape(format!("sensor {w}×{h}: at least 2×2 pixels")));
     }
     let n = carriers.len();
+    if lights.len() != n {
+        return Err(Error::Shape(format!(
+            "{} pattern lights for {n} carriers",
+            lights.len()
+        )));
+    }
     if cfg.dmd.is_none() && cfg.fourier_filter.is_none() && cfg.lens.is_none() {
         let imaged = Carrier::ideal_patterns(carriers, w, h);
         let display: Vec<f32> = imaged.data.iter().map(|v| v / 2.0).collect();
@@ -176,8 +202,8 @@ pub fn simulate_patterns(
     let mut targets = Cube::zeros(wd, hd, n);
     let mut imaged = Cube::zeros(w, h, n);
     let (mut throughput, mut masks, mut grid) = (Vec::new(), Vec::new(), Vec::new());
-    for (i, c) in carriers.iter().enumerate() {
-        let p = image_one(cfg, &m, c, w, h)?;
+    for (i, (c, light)) in carriers.iter().zip(lights).enumerate() {
+        let p = image_one(cfg, &m, c, light, w, h)?;
         display.plane_mut(i).copy_from_slice(&p.display);
         targets.plane_mut(i).copy_from_slice(&p.target);
         imaged.plane_mut(i).copy_from_slice(&p.imaged);
@@ -231,7 +257,14 @@ impl Geometry {
     }
 }
 
-fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize) -> Result<Imaged> {
+fn image_one(
+    cfg: &OpticsConfig,
+    m: &DmdConfig,
+    c: &Carrier,
+    light: &PatternLight,
+    w: usize,
+    h: usize,
+) -> Result<Imaged> {
     let (wd, hd) = (m.width, m.height);
     let pitch = m.pitch_um;
     let (s, sigma) = cfg.lens.as_ref().map_or((1.0, 1.0), |l| {
@@ -275,21 +308,27 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
             (0.5 + 0.5 * (tau * (c.fx * x + c.fy * y) + c.phase_rad).cos()) as f32
         })
         .collect();
-    let mask = cfg.fourier_filter.as_ref().map(|f| f.mask(pitch, fxd, fyd));
-    // On the mirror grid a bin stands for f and its replicas f + n.
+    let filter = cfg.fourier_filter.as_ref();
+    let aperture = filter.map(|f| f.aperture(pitch, fxd, fyd, light));
+    let (l_short, l_long) = light.support_nm();
+    // The passband the dither sees: the mask at the light's centroid.
+    let mask = aperture
+        .as_ref()
+        .map(|a| a.at_wavelength(light.centroid_nm()));
     let passband = |fx: f64, fy: f64| mask.as_ref().map_or(1.0, |mk| mk.at_periodic(fx, fy));
     let display = match &cfg.dmd {
         Some(d) => d.display(&target, &passband),
         None => target.clone(),
     };
 
-    // Grid: padding to resolve the openings, oversampling to hold the intensity's band.
-    let (pad, oversample) = match &mask {
+    // Grid: padding to resolve the openings at the longest wavelength (the smallest in
+    // frequency), oversampling to hold the intensity's band at the shortest (the largest).
+    let (pad, oversample) = match &aperture {
         None => (1, 1),
-        Some(mk) => {
-            let bins = mk.radius * wd.min(hd) as f64;
+        Some(ap) => {
+            let bins = ap.at_wavelength(l_long).radius * wd.min(hd) as f64;
             let pad = (MIN_PINHOLE_BINS / bins).ceil().max(1.0);
-            let (ex, ey) = mk.extent();
+            let (ex, ey) = ap.at_wavelength(l_short).extent();
             // A grey modulator has no replicas: nothing beyond its Nyquist band.
             let reach = if cfg.dmd.is_some() {
                 ex.max(ey)
@@ -302,7 +341,7 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
                 return Err(Error::config(
                     "optics",
                     "rig.fourier_filter.pinhole_radius_um",
-                    cfg.fourier_filter.as_ref().map_or(0.0, |f| f.pinhole_radius_um),
+                    ap.radius_um,
                     &format!(
                         "an opening of {:.2} frequency bins (reaching {reach:.3} cycles/mirror) needs a {}-fold padded, {}-fold oversampled grid of {side} > {MAX_GRID} samples; an opening must span at least 4 bins (widen it or use fewer mirrors) and reach well below 2 cycles/mirror",
                         bins, pad, os
@@ -314,10 +353,7 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
     };
     let (wc, hc) = (pad * wd, pad * hd);
     let (wf, hf) = (oversample * wc, oversample * hc);
-    let coherent = cfg
-        .fourier_filter
-        .as_ref()
-        .map(|f| f.illumination == Illumination::Coherent);
+    let coherent = filter.map(|f| f.illumination == Illumination::Coherent);
     // Coherent light is filtered as a field: amplitude √intensity (binary: itself).
     let mut padded = vec![0.0f32; wc * hc];
     for (row, src) in padded.chunks_exact_mut(wc).zip(display.chunks_exact(wd)) {
@@ -327,10 +363,10 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
     }
     let coarse = Fft2::new(wc, hc).forward(&padded);
     let fine = Fft2::new(wf, hf);
-    let scale = (oversample * oversample) as f32;
+    let scale = (oversample * oversample) as f64;
     // A grey modulator's band-limited spectrum: the Nyquist bin is split between ±½ when the
     // fine grid holds both (oversample > 1).
-    let half = |k: i64, n: usize| -> f32 {
+    let half = |k: i64, n: usize| -> f64 {
         match (2 * k.unsigned_abs() as usize).cmp(&n) {
             std::cmp::Ordering::Less => 1.0,
             std::cmp::Ordering::Equal if oversample > 1 => 0.5,
@@ -338,87 +374,90 @@ fn image_one(cfg: &OpticsConfig, m: &DmdConfig, c: &Carrier, w: usize, h: usize)
             std::cmp::Ordering::Greater => 0.0,
         }
     };
-    let freq = |kx: usize, ky: usize| -> (i64, i64, f64, f64) {
-        let sky = signed_bin(ky, hf);
-        (
-            kx as i64,
-            sky,
-            kx as f64 / wc as f64,
-            sky as f64 / hc as f64,
-        )
-    };
-    // Source spectrum on the fine grid: B(f mod 1)·envelope with a DMD, the band-limited
-    // target without; `masked` multiplies by the mask (coherent field filtering).
-    let source = |masked: bool| -> (Vec<Complex32>, f64, f64) {
-        let mut cols = vec![Complex32::default(); (wf / 2 + 1) * hf];
-        let (e_in, e_out): (f64, f64) = cols
-            .par_chunks_mut(hf)
-            .enumerate()
-            .map(|(kx, col)| {
-                let mult = if kx == 0 || 2 * kx == wf { 1.0 } else { 2.0 };
-                let (mut a, mut b) = (0.0, 0.0);
-                for (ky, v) in col.iter_mut().enumerate() {
-                    let (ix, iy, fx, fy) = freq(kx, ky);
-                    let mut val = coarse.at(ix, iy) * scale;
-                    match &cfg.dmd {
-                        Some(d) => val *= d.mirror_envelope(fx, fy) as f32,
-                        None => val *= half(ix, wc) * half(iy, hc),
-                    }
-                    a += mult * val.norm_sqr() as f64;
-                    if masked {
-                        val *= mask.as_ref().map_or(1.0, |mk| mk.at(fx, fy)) as f32;
-                    }
-                    b += mult * val.norm_sqr() as f64;
-                    *v = val;
-                }
-                (a, b)
-            })
-            .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1));
-        (cols, e_in, e_out)
-    };
-    let (mut spec, throughput) = match (coherent, &mask) {
-        (Some(true), Some(_)) => {
-            let (cols, e_in, e_out) = source(true);
-            let field = fine.inverse(&cols);
-            let intensity: Vec<f32> = field.par_iter().map(|a| a * a).collect();
-            (
-                fine.forward(&intensity).data,
-                e_out / e_in.max(f64::MIN_POSITIVE),
-            )
+    // The modulator's spectrum at bin (kx, ky), f = (kx/wc, ky/hc): B(f mod 1)·envelope with a
+    // DMD, the band-limited target without.
+    let source = |kx: i64, ky: i64| -> Complex64 {
+        let v = coarse.at(kx, ky);
+        let v = Complex64::new(v.re as f64, v.im as f64) * scale;
+        match &cfg.dmd {
+            Some(d) => v * d.mirror_envelope(kx as f64 / wc as f64, ky as f64 / hc as f64),
+            None => v * half(kx, wc) * half(ky, hc),
         }
-        (Some(false), Some(mk)) => {
-            let pupil: Vec<Complex32> = (0..(wf / 2 + 1) * hf)
-                .into_par_iter()
-                .map(|i| {
-                    let (_, _, fx, fy) = freq(i / hf, i % hf);
-                    Complex32::new(mk.at(fx, fy) as f32, 0.0)
-                })
-                .collect();
-            let otf = pupil_otf(&fine, &pupil);
-            // Open fraction of the mirror grid's band [−½, ½)².
-            let (mut open, mut all) = (0.0, 0.0);
-            for kx in -(wc as i64) / 2..(wc as i64 + 1) / 2 {
-                for ky in -(hc as i64) / 2..(hc as i64 + 1) / 2 {
-                    open += mk.at(kx as f64 / wc as f64, ky as f64 / hc as f64);
-                    all += 1.0;
-                }
-            }
-            let (mut cols, _, _) = source(false);
-            cols.par_iter_mut()
-                .zip(otf.data.par_iter())
-                .for_each(|(v, o)| *v *= o.re);
-            (cols, open / all)
-        }
-        _ => (source(false).0, 1.0),
     };
-    if let Some(l) = &cfg.lens {
-        spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
-            for (ky, v) in col.iter_mut().enumerate() {
-                let (_, _, fx, fy) = freq(kx, ky);
-                *v *= l.transfer(pitch, fx, fy) as f32;
+    // The lens (per wavelength: its OTF at the centroid and its slope) and the pixel box.
+    let centroid = light.centroid_nm();
+    let lens = |kx: i64, ky: i64| -> [f64; 2] {
+        let (fx, fy) = (kx as f64 / wc as f64, ky as f64 / hc as f64);
+        cfg.lens.as_ref().map_or([1.0, 0.0], |l| {
+            let px = l.pixel_transfer(pitch, fx, fy);
+            [
+                l.airy(pitch, fx, fy, centroid) * px,
+                l.airy_slope(pitch, fx, fy, centroid) * px,
+            ]
+        })
+    };
+    let signed = |i: usize, n: usize| signed_bin(i, n);
+    let mut spec = vec![Complex32::default(); (wf / 2 + 1) * hf];
+    let throughput = match (&aperture, filter) {
+        (Some(ap), Some(f)) => {
+            let bins = passed_bins(ap, light, f.illumination, (wc, hc), source)?;
+            let sums = pair_sums(&bins);
+            let (rx, ry) = sums.reach();
+            if 2 * rx > wf as i64 || 2 * ry >= hf as i64 {
+                return Err(Error::Numerical(format!(
+                    "the intensity past the mask reaches ({rx}, {ry}) bins, beyond the {wf}×{hf} grid"
+                )));
             }
-        });
-    }
+            spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
+                for (i, v) in col.iter_mut().enumerate() {
+                    let (kx, ky) = (kx as i64, signed(i, hf));
+                    let [s0, s1] = sums.at(kx, ky);
+                    if s0 == Complex64::default() && s1 == Complex64::default() {
+                        continue;
+                    }
+                    let [l0, l1] = lens(kx, ky);
+                    let mut x = s0 * l0 + s1 * l1;
+                    if !coherent.unwrap_or(true) {
+                        x *= source(kx, ky);
+                    }
+                    *v = Complex32::new(x.re as f32, x.im as f32);
+                }
+            });
+            if coherent == Some(true) {
+                // The passed share of the field's energy on the fine grid, over the light.
+                let all: f64 = (0..wf / 2 + 1)
+                    .into_par_iter()
+                    .map(|kx| {
+                        let mult = if kx == 0 || 2 * kx == wf { 1.0 } else { 2.0 };
+                        (0..hf)
+                            .map(|i| mult * source(kx as i64, signed(i, hf)).norm_sqr())
+                            .sum::<f64>()
+                    })
+                    .sum();
+                let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();
+                passed / all.max(f64::MIN_POSITIVE)
+            } else {
+                // The open share of the mirror grid's band, over the light.
+                let band = |k: i64, n: usize| 2 * k >= -(n as i64) && 2 * k < n as i64;
+                let open: f64 = bins
+                    .iter()
+                    .filter(|b| band(b.kx, wc) && band(b.ky, hc))
+                    .map(|b| b.weight)
+                    .sum();
+                open / (wc * hc) as f64
+            }
+        }
+        _ => {
+            spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
+                for (i, v) in col.iter_mut().enumerate() {
+                    let (kx, ky) = (kx as i64, signed(i, hf));
+                    let x = source(kx, ky) * lens(kx, ky)[0];
+                    *v = Complex32::new(x.re as f32, x.im as f32);
+                }
+            });
+            1.0
+        }
+    };
     let field = fine.inverse(&spec);
     // Sample at the sensor pixels (fine sample j sits at mirror coordinate j / oversample).
     let os = oversample as f64;
@@ -495,10 +534,16 @@ mod tests {
     use super::*;
     use crate::optics::carriers::default_layout;
     use crate::optics::dither::DitherMethod;
+    use crate::optics::fourier_filter::PinholeShape;
     use crate::recon::demux::dft_at;
     use std::f64::consts::PI;
 
-    /// Pinhole radius in µm that is `cpp` cycles/mirror at the default 4f and pitch.
+    /// The 532 nm line for `n` patterns: the monochromatic cases worked by hand.
+    fn line(n: usize) -> Vec<PatternLight> {
+        vec![PatternLight::Line(532.0); n]
+    }
+
+    /// Pinhole radius in µm that is `cpp` cycles/mirror at 532 nm, the default 4f and pitch.
     fn radius_um(cpp: f64) -> f64 {
         cpp * 0.532 * 100_000.0 / 13.68
     }
@@ -514,7 +559,7 @@ mod tests {
     #[test]
     fn no_stage_gives_exactly_the_ideal_patterns() {
         let c = default_layout();
-        let out = imaged_patterns(&OpticsConfig::default(), &c, 48, 40).unwrap();
+        let out = imaged_patterns(&OpticsConfig::default(), &c, &line(c.len()), 48, 40).unwrap();
         for (i, ci) in c.iter().enumerate() {
             assert_eq!(out.plane(i), &ci.ideal_pattern(48, 40)[..]);
         }
@@ -540,7 +585,7 @@ mod tests {
                 phase_rad: 1.0,
             },
         ];
-        let out = imaged_patterns(&cfg, &c, 64, 48).unwrap();
+        let out = imaged_patterns(&cfg, &c, &line(2), 64, 48).unwrap();
         for (i, ci) in c.iter().enumerate() {
             let err = out
                 .plane(i)
@@ -565,7 +610,7 @@ mod tests {
             fy: 0.0,
             phase_rad: 0.3,
         };
-        let set = simulate_patterns(&cfg, &[c], 64, 64).unwrap();
+        let set = simulate_patterns(&cfg, &[c], &line(1), 64, 64).unwrap();
         for (p, v) in set.imaged.data.iter().enumerate() {
             let want = 1.0 + 2.0 / 3.0 * (2.0 * PI * 0.25 * (p % 64) as f64 + 0.3).cos();
             assert!((*v as f64 - want).abs() < 1e-4, "pixel {p}: {v} vs {want}");
@@ -596,7 +641,7 @@ mod tests {
             fy: 0.0,
             phase_rad: PI / 8.0,
         };
-        let set = simulate_patterns(&cfg, &[c], 128, 128).unwrap();
+        let set = simulate_patterns(&cfg, &[c], &line(1), 128, 128).unwrap();
         let s = set.imaged.plane(0);
         let d = 0.25 + 2.0 / (PI * PI);
         let a1 = dft_at(s, 128, 128, 16, 0).norm();
@@ -623,6 +668,101 @@ mod tests {
     }
 
     #[test]
+    fn broadband_light_through_a_disc_keeps_the_carrier_of_its_window_only() {
+        // The 50 % grating of the test above (period 8, fill 1) on 512 mirrors, flat light on
+        // 420–580 nm, discs of 0.01 cycles/mirror cut for 500 nm. The ±1 orders (0.125) pass
+        // while |λ − 500|·0.125 ≤ 0.01·500, i.e. on 460–540 nm: half the light (f = ½). Outside
+        // that window the field is ½ (DC alone), inside ½ + (2/π) cos θ, so the mean intensity
+        // is D = ¼ + f·2/π² and, normalised by it, the carrier is f·(1/π)/D per exponential and
+        // 2ω is f·(1/π²)/D. A streak over the band passes the orders everywhere: f = 1.
+        let n = 512;
+        let band = Curve::new("flat", vec![420.0, 580.0], vec![1.0, 1.0]).unwrap();
+        let light = PatternLight::band(&band).unwrap();
+        let c = Carrier {
+            fx: 0.125,
+            fy: 0.0,
+            phase_rad: PI / 8.0,
+        };
+        for (shape, f) in [(PinholeShape::Circle, 0.5), (PinholeShape::Streak, 1.0)] {
+            let cfg = OpticsConfig {
+                dmd: Some(DmdConfig {
+                    width: n,
+                    height: n,
+                    fill_factor: 1.0,
+                    dither: DitherMethod::Threshold,
+                    ..Default::default()
+                }),
+                fourier_filter: Some(FourierFilterConfig {
+                    pinhole_radius_um: 0.01
+                        * 500.0
+                        * FourierFilterConfig::default().um_per_cycle_nm(13.68),
+                    design_wavelength_nm: Some(500.0),
+                    shape,
+                    ..Default::default()
+                }),
+                lens: None,
+            };
+            let set = simulate_patterns(&cfg, &[c], std::slice::from_ref(&light), n, n).unwrap();
+            let s = set.imaged.plane(0);
+            let d = 0.25 + f * 2.0 / (PI * PI);
+            let a1 = dft_at(s, n, n, 64, 0).norm();
+            let a2 = dft_at(s, n, n, 128, 0).norm();
+            assert!(
+                (a1 - f / PI / d).abs() < 1e-3,
+                "{shape:?}: carrier {a1} vs {}",
+                f / PI / d
+            );
+            assert!(
+                (a2 - f / (PI * PI) / d).abs() < 1e-3,
+                "{shape:?}: 2ω {a2} vs {}",
+                f / (PI * PI) / d
+            );
+        }
+    }
+
+    #[test]
+    fn a_broadband_lens_blurs_as_the_light_weighted_mean_of_its_otfs() {
+        // Grey modulator, lens only, flat light on 420–680 nm: the carrier's gain is
+        // ∫ w(λ)·OTF_λ dλ × pixel box; the model takes the OTF at the centroid, exact to first
+        // order (the first moment about the centroid vanishes), so the difference is the
+        // curvature term, far below 10⁻³ here.
+        let band = Curve::new("flat", vec![420.0, 680.0], vec![1.0, 1.0]).unwrap();
+        let light = PatternLight::band(&band).unwrap();
+        let lens = LensConfig {
+            na: 0.02,
+            ..Default::default()
+        };
+        let cfg = OpticsConfig {
+            lens: Some(lens.clone()),
+            ..Default::default()
+        };
+        let c = Carrier {
+            fx: 0.25,
+            fy: 0.125,
+            phase_rad: 0.7,
+        };
+        let s = imaged_patterns(&cfg, &[c], &[light], 64, 64).unwrap();
+        let g = dft_at(s.plane(0), 64, 64, 16, 8).norm() / 0.5;
+        let steps = 2600;
+        let mean_otf = (0..steps)
+            .map(|i| {
+                lens.airy(
+                    13.68,
+                    0.25,
+                    0.125,
+                    420.0 + 260.0 * (i as f64 + 0.5) / steps as f64,
+                )
+            })
+            .sum::<f64>()
+            / steps as f64;
+        let want = mean_otf * lens.pixel_transfer(13.68, 0.25, 0.125);
+        assert!((g - want).abs() < 1e-3, "{g} vs {want}");
+        // and the wavelength matters: the 420 nm and 680 nm OTFs differ by more than that.
+        let spread = lens.airy(13.68, 0.25, 0.125, 420.0) - lens.airy(13.68, 0.25, 0.125, 680.0);
+        assert!(spread > 0.05, "{spread}");
+    }
+
+    #[test]
     fn lens_and_pixel_transfer_scale_the_carrier_by_hand() {
         // Grey modulator, inverted unit-magnification image, one pixel per mirror: the carrier
         // amplitude is ½ e^{iφ} times the Airy OTF times sinc(fx)·sinc(fy).
@@ -639,9 +779,9 @@ mod tests {
             fy: 0.125,
             phase_rad: 0.7,
         };
-        let s = imaged_patterns(&cfg, &[c], 64, 64).unwrap();
+        let s = imaged_patterns(&cfg, &[c], &line(1), 64, 64).unwrap();
         let g = dft_at(s.plane(0), 64, 64, 16, 8);
-        let t = lens.transfer(13.68, 0.25, 0.125);
+        let t = lens.transfer(13.68, 0.25, 0.125, 532.0);
         assert!(t < 0.9 && t > 0.1, "{t}");
         let want = rustfft::num_complex::Complex64::from_polar(0.5 * t, 0.7);
         assert!((g - want).norm() < 1e-4, "{g} vs {want}");
@@ -665,7 +805,7 @@ mod tests {
             fourier_filter: Some(filter(2.0 / 64.0, Illumination::Coherent)),
             lens: None,
         };
-        let set = simulate_patterns(&cfg, &c, 64, 64).unwrap();
+        let set = simulate_patterns(&cfg, &c, &line(c.len()), 64, 64).unwrap();
         assert_eq!(set.grid[0].0, 2);
         assert!(set.imaged.all_finite());
         // A 0.01-bin opening would need a 400-fold padded grid: refused, naming the key.
@@ -673,7 +813,9 @@ mod tests {
             fourier_filter: Some(filter(0.01 / 64.0, Illumination::Coherent)),
             ..cfg
         };
-        let e = imaged_patterns(&cfg, &c, 64, 64).unwrap_err().to_string();
+        let e = imaged_patterns(&cfg, &c, &line(c.len()), 64, 64)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("rig.fourier_filter.pinhole_radius_um"), "{e}");
     }
 
@@ -694,7 +836,7 @@ mod tests {
                 lens: Some(LensConfig::default()),
             };
             let c = default_layout();
-            let set = simulate_patterns(&cfg, &c, 64, 64).unwrap();
+            let set = simulate_patterns(&cfg, &c, &line(c.len()), 64, 64).unwrap();
             for (i, ci) in c.iter().enumerate() {
                 let s = set.imaged.plane(i);
                 let mean = s.iter().map(|&v| v as f64).sum::<f64>() / s.len() as f64;
@@ -724,7 +866,7 @@ mod tests {
             }),
             ..Default::default()
         };
-        let e = imaged_patterns(&cfg, &default_layout(), 64, 64)
+        let e = imaged_patterns(&cfg, &default_layout(), &line(6), 64, 64)
             .unwrap_err()
             .to_string();
         assert!(e.contains("rig.dmd.width"), "{e}");

@@ -6,8 +6,10 @@ pub mod dither;
 pub mod dmd;
 pub mod fourier_filter;
 pub mod imaging;
+pub mod light;
 pub mod pattern_report;
 pub mod psf;
+pub mod relay;
 pub mod wheel;
 
 pub use carriers::Carrier;

@@ -6,6 +6,7 @@ use super::carriers::{window_bins, Carrier};
 use super::dither::{in_band_error, DitherMethod};
 use super::fourier_filter::{FourierFilterConfig, Illumination};
 use super::imaging::{simulate_patterns, stage_names, OpticsConfig, PatternSet};
+use super::light::PatternLight;
 use crate::error::{Error, Result};
 use crate::recon::demux::dft_at;
 use crate::recon::fft2::{Fft2, HalfSpectrum};
@@ -64,6 +65,7 @@ fn window_energy(spec: &HalfSpectrum, cx: i64, cy: i64, wx: usize, wy: usize) ->
 pub fn pattern_report(
     cfg: &OpticsConfig,
     carriers: &[Carrier],
+    lights: &[PatternLight],
     w: usize,
     h: usize,
     crop: f64,
@@ -76,7 +78,7 @@ pub fn pattern_report(
             "must lie in (0, 0.5]",
         ));
     }
-    let set = simulate_patterns(cfg, carriers, w, h)?;
+    let set = simulate_patterns(cfg, carriers, lights, w, h)?;
     let fft = Fft2::new(w, h);
     let (wx, wy) = (window_bins(crop, w).max(1), window_bins(crop, h).max(1));
     let bins: Vec<(i64, i64)> = carriers
@@ -244,6 +246,7 @@ pub struct StudyRow {
 pub fn dither_study(
     base: &OpticsConfig,
     carriers: &[Carrier],
+    lights: &[PatternLight],
     w: usize,
     h: usize,
     crop: f64,
@@ -263,7 +266,7 @@ pub fn dither_study(
                     illumination: ill,
                     ..f
                 });
-                let (rep, _) = pattern_report(&cfg, carriers, w, h, crop)?;
+                let (rep, _) = pattern_report(&cfg, carriers, lights, w, h, crop)?;
                 let n = rep.channels.len().max(1) as f64;
                 rows.push(StudyRow {
                     dither: m.name(),
@@ -314,6 +317,11 @@ mod tests {
     use crate::optics::dmd::DmdConfig;
     use crate::optics::psf::LensConfig;
 
+    /// The 532 nm line for `n` patterns.
+    fn line(n: usize) -> Vec<PatternLight> {
+        vec![PatternLight::Line(532.0); n]
+    }
+
     fn small_rig() -> OpticsConfig {
         OpticsConfig {
             dmd: Some(DmdConfig {
@@ -331,8 +339,15 @@ mod tests {
 
     #[test]
     fn ideal_patterns_report_no_error_and_no_crosstalk() {
-        let (rep, _) =
-            pattern_report(&OpticsConfig::default(), &default_layout(), 64, 64, 0.25).unwrap();
+        let (rep, _) = pattern_report(
+            &OpticsConfig::default(),
+            &default_layout(),
+            &line(6),
+            64,
+            64,
+            0.25,
+        )
+        .unwrap();
         for (i, c) in rep.channels.iter().enumerate() {
             assert!(
                 c.rel_rms_error < 1e-6 && (c.gain - 1.0).abs() < 1e-6,
@@ -347,8 +362,16 @@ mod tests {
     #[test]
     fn study_shows_in_band_feedback_ahead_of_floyd_steinberg() {
         let radius = 6.0 / 128.0 * 53_200.0 / 13.68;
-        let rows =
-            dither_study(&small_rig(), &default_layout(), 128, 128, 0.25, &[radius]).unwrap();
+        let rows = dither_study(
+            &small_rig(),
+            &default_layout(),
+            &line(6),
+            128,
+            128,
+            0.25,
+            &[radius],
+        )
+        .unwrap();
         assert_eq!(rows.len(), 2 * DitherMethod::ALL.len());
         eprintln!("{}", study_table(&rows));
         for ill in [Illumination::Coherent, Illumination::Incoherent] {
@@ -374,27 +397,11 @@ mod tests {
     #[test]
     fn pngs_are_written() {
         let dir = std::env::temp_dir().join(format!("specmux-patterns-{}", std::process::id()));
-        let (_, set) = pattern_report(&small_rig(), &default_layout()[..2], 64, 64, 0.25).unwrap();
+        let (_, set) =
+            pattern_report(&small_rig(), &default_layout()[..2], &line(2), 64, 64, 0.25).unwrap();
         write_pattern_pngs(&set, &dir).unwrap();
         let img = image::open(dir.join("pattern_1_display.png")).unwrap();
         assert_eq!((img.width(), img.height()), (128, 128));
         std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    /// The table in docs/optics.md: the prototype rig at 768 × 768, three pinhole radii.
-    /// `cargo test --release --lib optics::pattern_report::tests::dither_study_768 -- --ignored --nocapture`
-    #[test]
-    #[ignore = "minutes of CPU: produces the docs table"]
-    fn dither_study_768() {
-        let rows = dither_study(
-            &OpticsConfig::prototype(),
-            &default_layout(),
-            768,
-            768,
-            0.25,
-            &[12.5, 25.0, 50.0],
-        )
-        .unwrap();
-        println!("{}", study_table(&rows));
     }
 }

@@ -14,9 +14,6 @@ pub struct LensConfig {
     /// Image-side numerical aperture of the projection lens at the sample (0.1: assumed; the
     /// paper does not give it).
     pub na: f64,
-    /// Wavelength of the PSF, nm. One PSF for all patterns (a documented choice): 550 nm, the
-    /// centroid of the 400–700 nm band; its blur is a fraction of a mirror at NA 0.1.
-    pub wavelength_nm: f64,
     /// Lateral magnification DMD → sample; negative = inverted image (−1: a single relay).
     pub magnification: f64,
     /// Lateral magnification sample → sensor (5/13.68 = 0.3655 makes one mirror one pixel,
@@ -30,7 +27,6 @@ impl Default for LensConfig {
     fn default() -> Self {
         LensConfig {
             na: 0.1,
-            wavelength_nm: 550.0,
             magnification: -1.0,
             camera_magnification: 5.0 / 13.68,
             sensor_pitch_um: 5.0,
@@ -46,14 +42,6 @@ impl LensConfig {
                 "rig.lens.na",
                 self.na,
                 "must lie in (0, 1.5]",
-            ));
-        }
-        if !(self.wavelength_nm.is_finite() && (200.0..=2000.0).contains(&self.wavelength_nm)) {
-            return Err(Error::config(
-                file,
-                "rig.lens.wavelength_nm",
-                self.wavelength_nm,
-                "must be 200–2000 nm",
             ));
         }
         if !(self.magnification.is_finite() && (1e-3..=1e3).contains(&self.magnification.abs())) {
@@ -98,12 +86,58 @@ impl LensConfig {
         self.magnification < 0.0
     }
 
-    /// Transfer of the projection lens and the pixel box at (fx, fy) in cycles per mirror:
-    /// the Airy OTF at ν = f/(pitch·|m|) / (2 NA/λ) times sinc(fx/s)·sinc(fy/s), s pixels/mirror.
-    pub fn transfer(&self, pitch_um: f64, fx: f64, fy: f64) -> f64 {
-        let cutoff_per_mirror =
-            2.0 * self.na / (self.wavelength_nm * 1e-3) * pitch_um * self.magnification.abs();
+    /// The Airy OTF's cutoff in cycles per mirror for light of `wavelength_nm`: 2 NA/λ on the
+    /// sample, times the mirror's image pitch there.
+    fn cutoff(&self, pitch_um: f64, wavelength_nm: f64) -> f64 {
+        2.0 * self.na / (wavelength_nm * 1e-3) * pitch_um * self.magnification.abs()
+    }
+
+    /// The sensor pixel box's transfer at (fx, fy) cycles per mirror: sinc(fx/s)·sinc(fy/s).
+    pub fn pixel_transfer(&self, pitch_um: f64, fx: f64, fy: f64) -> f64 {
         let s = self.sensor_pixels_per_mirror(pitch_um);
-        circ_otf(fx.hypot(fy) / cutoff_per_mirror) * sinc(fx / s) * sinc(fy / s)
+        sinc(fx / s) * sinc(fy / s)
+    }
+
+    /// The projection lens's Airy OTF at (fx, fy) cycles per mirror for light of `wavelength_nm`.
+    pub fn airy(&self, pitch_um: f64, fx: f64, fy: f64, wavelength_nm: f64) -> f64 {
+        circ_otf(fx.hypot(fy) / self.cutoff(pitch_um, wavelength_nm))
+    }
+
+    /// ∂/∂λ of [`LensConfig::airy`] per nm: ν = f/cutoff grows as λ, and d OTF/dν = −(4/π)√(1 − ν²).
+    pub fn airy_slope(&self, pitch_um: f64, fx: f64, fy: f64, wavelength_nm: f64) -> f64 {
+        let nu = fx.hypot(fy) / self.cutoff(pitch_um, wavelength_nm);
+        if nu >= 1.0 {
+            return 0.0;
+        }
+        -4.0 / std::f64::consts::PI * (1.0 - nu * nu).sqrt() * nu / wavelength_nm
+    }
+
+    /// Lens and pixel box together for monochromatic light.
+    pub fn transfer(&self, pitch_um: f64, fx: f64, fy: f64, wavelength_nm: f64) -> f64 {
+        self.airy(pitch_um, fx, fy, wavelength_nm) * self.pixel_transfer(pitch_um, fx, fy)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn airy_cutoff_by_hand_and_its_slope() {
+        // NA 0.1, 550 nm, 13.68 µm mirrors imaged at |m| = 1: cutoff 2·0.1/0.55 µm⁻¹ · 13.68 µm
+        // = 4.975 cycles/mirror.
+        let l = LensConfig::default();
+        assert!((l.cutoff(13.68, 550.0) - 2.0 * 0.1 / 0.55 * 13.68).abs() < 1e-12);
+        assert_eq!(l.airy(13.68, 5.0, 0.0, 550.0), 0.0);
+        assert!((l.airy(13.68, 0.0, 0.0, 550.0) - 1.0).abs() < 1e-15);
+        for (fx, fy, wl) in [(0.5, 0.25, 550.0), (1.5, -0.7, 420.0), (3.0, 2.0, 690.0)] {
+            let h = 1e-3;
+            let fd = (l.airy(13.68, fx, fy, wl + h) - l.airy(13.68, fx, fy, wl - h)) / (2.0 * h);
+            let an = l.airy_slope(13.68, fx, fy, wl);
+            assert!(
+                an < 0.0 && (fd - an).abs() < 1e-6 * an.abs().max(1e-9),
+                "{fd} vs {an}"
+            );
+        }
     }
 }

@@ -485,8 +485,8 @@ pub(crate) mod tests {
             .collect();
         let mut c = Cube::zeros(w, h, 6);
         let tau = std::f32::consts::TAU;
-        for k in 0..6 {
-            for (p, v) in c.plane_mut(k).iter_mut().enumerate() {
+        for (k, plane) in c.planes_mut().enumerate() {
+            for (p, v) in plane.iter_mut().enumerate() {
                 let (x, y) = ((p % w) as f32 / w as f32, (p / w) as f32 / h as f32);
                 let shade = 0.8 + 0.2 * (tau * (x + 0.5 * y)).cos();
                 *v = spectra[labels[p] as usize][k] * shade;

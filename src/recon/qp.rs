@@ -325,26 +325,13 @@ impl Unmixer {
     }
 
     /// Accept the active set's result: α finite and every band r = Bα ≥ −1e-9·scale.
-    fn finish(
-        &self,
-        alpha: &[f64; MAX_BASIS],
-        r: &[f64; MAX_BANDS],
-        w: &[usize],
-        lam: &[f64; MAX_BASIS],
-        scale: f64,
-        out_alpha: &mut [f64],
-        info: &mut SolveInfo,
-    ) -> Result<()> {
+    fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
         let worst = r[..self.m].iter().cloned().fold(0.0f64, f64::min);
         if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
                 "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"
             )));
         }
-        out_alpha.copy_from_slice(&alpha[..self.n]);
-        info.active = w.len();
-        info.bands[..w.len()].copy_from_slice(w);
-        info.multipliers[..w.len()].copy_from_slice(&lam[..w.len()]);
         Ok(())
     }
 

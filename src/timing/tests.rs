@@ -206,9 +206,12 @@ fn faster_than_the_dmd_is_refused() {
     assert!(err.to_string().contains("still shows"), "{err}");
 }
 
+/// A change to a valid configuration.
+type Mutation = Box<dyn Fn(&mut TimingConfig)>;
+
 #[test]
 fn bad_values_name_their_key() {
-    let cases: Vec<(Box<dyn Fn(&mut TimingConfig)>, &str)> = vec![
+    let cases: Vec<(Mutation, &str)> = vec![
         (
             Box::new(|c| c.wheel.segments_deg = vec![60.0; 5]),
             "rig.timing.wheel.segments_deg",

@@ -208,7 +208,12 @@ impl Unmixer {
             }
             self.spectrum(&alpha, s);
         }
+        self.check_feasible(&alpha, s, scale)?;
+        out_alpha.copy_from_slice(&alpha[..n]);
         info.iterations = iterations;
-        self.finish(&alpha, s, &st.active[..st.q], &st.u, scale, out_alpha, info)
+        info.active = st.q;
+        info.bands[..st.q].copy_from_slice(&st.active[..st.q]);
+        info.multipliers[..st.q].copy_from_slice(&st.u[..st.q]);
+        Ok(())
     }
 }
