@@ -36,6 +36,9 @@ pub struct ChannelRow {
     pub ssim: f64,
     pub bound_psnr_db: f64,
     pub bound_ssim: f64,
+    /// |ĝ|/½: the carrier amplitude the demultiplexer divides by, against the ideal pattern's
+    /// (1 for ideal sinusoids; measured on the imaged patterns otherwise).
+    pub carrier_gain: f64,
 }
 
 /// How well the spectral basis represents the training and the held-out reflectances.
@@ -150,6 +153,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
             ssim: m_x.ssim_per_plane[i],
             bound_psnr_db: m_bound.psnr_per_plane[i],
             bound_ssim: m_bound.ssim_per_plane[i],
+            carrier_gain: recon.demux.gains[i].norm() / 0.5,
         })
         .collect();
     // The budget splits the leaks of the ideal sinusoids; with simulated optics or timing it
@@ -208,19 +212,20 @@ impl RunReport {
             );
         }
         s += &format!(
-            "\n{:<8} {:<16} {:>12} {:>10} {:>8} {:>10} {:>8}\n",
-            "channel", "filter", "carrier", "PSNR dB", "SSIM", "bound dB", "bound"
+            "\n{:<8} {:<16} {:>12} {:>10} {:>8} {:>10} {:>8} {:>7}\n",
+            "channel", "filter", "carrier", "PSNR dB", "SSIM", "bound dB", "bound", "gain"
         );
         for c in &self.channels {
             s += &format!(
-                "{:<8} {:<16} {:>12} {:>10.2} {:>8.4} {:>10.2} {:>8.4}\n",
+                "{:<8} {:<16} {:>12} {:>10.2} {:>8.4} {:>10.2} {:>8.4} {:>7.3}\n",
                 c.channel,
                 c.filter,
                 format!("({},{})", c.carrier[0], c.carrier[1]),
                 c.psnr_db,
                 c.ssim,
                 c.bound_psnr_db,
-                c.bound_ssim
+                c.bound_ssim,
+                c.carrier_gain
             );
         }
         if let Some(b) = &self.error_budget {

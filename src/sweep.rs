@@ -114,6 +114,8 @@ pub struct SweepRow {
     pub cube_psnr_db: Option<f64>,
     pub cube_ssim: Option<f64>,
     pub cube_sam_deg: Option<f64>,
+    /// Smallest and largest carrier gain |ĝ|/½ over the channels (1 with ideal sinusoids).
+    pub carrier_gain: Option<(f64, f64)>,
     /// Reconstruction of one frame (calibration, demultiplexing, crosstalk, de-aliasing, unmixing).
     pub seconds: Option<f64>,
     /// Why the run was refused, if it was.
@@ -139,6 +141,10 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                     cube_psnr_db: cube.map(|r| r.psnr_db),
                     cube_ssim: cube.map(|r| r.ssim),
                     cube_sam_deg: cube.map(|r| r.sam_deg),
+                    carrier_gain: rep.channels.iter().map(|c| c.carrier_gain).fold(None, |a, g| {
+                        let (lo, hi) = a.unwrap_or((g, g));
+                        Some((lo.min(g), hi.max(g)))
+                    }),
                     seconds: Some(rep.reconstruction_seconds),
                     refused: None,
                 }
@@ -149,6 +155,7 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                 cube_psnr_db: None,
                 cube_ssim: None,
                 cube_sam_deg: None,
+                carrier_gain: None,
                 seconds: None,
                 refused: Some(e.to_string()),
             },
@@ -163,13 +170,16 @@ pub fn markdown(vary: &[Vary], rows: &[SweepRow]) -> String {
     let f = |v: Option<f64>, p: usize| v.map_or("—".to_string(), |x| format!("{x:.p$}"));
     let keys: Vec<&str> = vary.iter().map(|v| v.key.as_str()).collect();
     let mut s = format!(
-        "| {} | x̂ PSNR dB | cube PSNR dB | cube SSIM | cube SAM ° | recon s | note |\n|{}---|---|---|---|---|---|\n",
+        "| {} | carrier gain | x̂ PSNR dB | cube PSNR dB | cube SSIM | cube SAM ° | recon s | note |\n|{}---|---|---|---|---|---|---|\n",
         keys.join(" | "),
         "---|".repeat(keys.len())
     );
     for r in rows {
+        let gain = r
+            .carrier_gain
+            .map_or("—".to_string(), |(lo, hi)| format!("{lo:.3}–{hi:.3}"));
         s += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {gain} | {} | {} | {} | {} | {} | {} |\n",
             r.values.join(" | "),
             f(r.channels_psnr_db, 2),
             f(r.cube_psnr_db, 2),
