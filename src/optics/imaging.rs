@@ -322,7 +322,15 @@ fn image_one(
     };
 
     // Grid: padding to resolve the openings at the longest wavelength (the smallest in
-    // frequency), oversampling to hold the intensity's band at the shortest (the largest).
+    // frequency). The intensity is exact at the nodes of the simulation grid (its spectrum is
+    // folded onto it); when the sensor pixels fall between mirror nodes the grid is made
+    // `oversample` times finer than the mirrors, enough to hold the intensity's band (twice the
+    // openings' reach at the shortest wavelength) for the interpolation.
+    let on_node = s == 1.0
+        && [g.mirror_of(0.0, 0.0), g.mirror_of(1.0, 1.0)]
+            .iter()
+            .all(|&(u, v)| u.fract() == 0.0 && v.fract() == 0.0);
+    let mut reach = 0.5f64;
     let (pad, oversample) = match &aperture {
         None => (1, 1),
         Some(ap) => {
@@ -330,12 +338,16 @@ fn image_one(
             let pad = (MIN_PINHOLE_BINS / bins).ceil().max(1.0);
             let (ex, ey) = ap.at_wavelength(l_short).extent();
             // A grey modulator has no replicas: nothing beyond its Nyquist band.
-            let reach = if cfg.dmd.is_some() {
+            reach = if cfg.dmd.is_some() {
                 ex.max(ey)
             } else {
                 ex.max(ey).min(0.5)
             };
-            let os = (4.0 * reach).floor() + 1.0;
+            let os = if on_node {
+                1.0
+            } else {
+                (4.0 * reach).floor() + 1.0
+            };
             let side = pad * os * wd.max(hd) as f64;
             if !side.is_finite() || side > MAX_GRID as f64 {
                 return Err(Error::config(
@@ -366,24 +378,27 @@ fn image_one(
     let scale = (oversample * oversample) as f64;
     // A grey modulator's band-limited spectrum: the Nyquist bin is split between ±½ when the
     // fine grid holds both (oversample > 1).
-    let half = |k: i64, n: usize| -> f64 {
+    // A grey modulator's band-limited spectrum. Its Nyquist component is a real cosine: on the
+    // frequency lattice of the mask (where ±½ are two points) each half gets half of it; on the
+    // grid of the unfiltered path (one bin for both) it is whole.
+    let nyquist = |k: i64, n: usize, split: f64| -> f64 {
         match (2 * k.unsigned_abs() as usize).cmp(&n) {
             std::cmp::Ordering::Less => 1.0,
-            std::cmp::Ordering::Equal if oversample > 1 => 0.5,
-            std::cmp::Ordering::Equal => 1.0,
+            std::cmp::Ordering::Equal => split,
             std::cmp::Ordering::Greater => 0.0,
         }
     };
     // The modulator's spectrum at bin (kx, ky), f = (kx/wc, ky/hc): B(f mod 1)·envelope with a
     // DMD, the band-limited target without.
-    let source = |kx: i64, ky: i64| -> Complex64 {
+    let spectrum_at = |kx: i64, ky: i64, split: f64| -> Complex64 {
         let v = coarse.at(kx, ky);
         let v = Complex64::new(v.re as f64, v.im as f64) * scale;
         match &cfg.dmd {
             Some(d) => v * d.mirror_envelope(kx as f64 / wc as f64, ky as f64 / hc as f64),
-            None => v * half(kx, wc) * half(ky, hc),
+            None => v * nyquist(kx, wc, split) * nyquist(ky, hc, split),
         }
     };
+    let source = |kx: i64, ky: i64| spectrum_at(kx, ky, 0.5);
     // The lens (per wavelength: its OTF at the centroid and its slope) and the pixel box.
     let centroid = light.centroid_nm();
     let lens = |kx: i64, ky: i64| -> [f64; 2] {
@@ -402,37 +417,52 @@ fn image_one(
         (Some(ap), Some(f)) => {
             let bins = passed_bins(ap, light, f.illumination, (wc, hc), source)?;
             let sums = pair_sums(&bins);
+            // Î(q) through the lens for q with qx ≥ 0, then folded onto the grid's torus with
+            // Î(−q) = Î(q)* (sampling on the grid's nodes is exact for the folded spectrum).
             let (rx, ry) = sums.reach();
-            if 2 * rx > wf as i64 || 2 * ry >= hf as i64 {
-                return Err(Error::Numerical(format!(
-                    "the intensity past the mask reaches ({rx}, {ry}) bins, beyond the {wf}×{hf} grid"
-                )));
-            }
-            spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
-                for (i, v) in col.iter_mut().enumerate() {
-                    let (kx, ky) = (kx as i64, signed(i, hf));
-                    let [s0, s1] = sums.at(kx, ky);
-                    if s0 == Complex64::default() && s1 == Complex64::default() {
-                        continue;
+            let values: Vec<Vec<Complex64>> = (0..=rx)
+                .into_par_iter()
+                .map(|qx| {
+                    (-ry..=ry)
+                        .map(|qy| {
+                            let [s0, s1] = sums.at(qx, qy);
+                            if s0 == Complex64::default() && s1 == Complex64::default() {
+                                return s0;
+                            }
+                            let [l0, l1] = lens(qx, qy);
+                            let x = s0 * l0 + s1 * l1;
+                            if coherent == Some(true) {
+                                x
+                            } else {
+                                x * source(qx, qy)
+                            }
+                        })
+                        .collect()
+                })
+                .collect();
+            let mut torus = vec![Complex64::default(); wf * hf];
+            let at = |qx: i64, qy: i64| {
+                qx.rem_euclid(wf as i64) as usize * hf + qy.rem_euclid(hf as i64) as usize
+            };
+            for (qx, col) in (0..).zip(&values) {
+                for (qy, &x) in (-ry..).zip(col) {
+                    torus[at(qx, qy)] += x;
+                    if qx > 0 {
+                        torus[at(-qx, -qy)] += x.conj();
                     }
-                    let [l0, l1] = lens(kx, ky);
-                    let mut x = s0 * l0 + s1 * l1;
-                    if !coherent.unwrap_or(true) {
-                        x *= source(kx, ky);
-                    }
-                    *v = Complex32::new(x.re as f32, x.im as f32);
                 }
-            });
+            }
+            for (v, t) in spec.iter_mut().zip(&torus) {
+                *v = Complex32::new(t.re as f32, t.im as f32);
+            }
             if coherent == Some(true) {
-                // The passed share of the field's energy on the fine grid, over the light.
-                let all: f64 = (0..wf / 2 + 1)
+                // The passed share, over the light, of the field's energy at frequencies up
+                // to the openings' reach (at least the mirror grid's band).
+                let k = |n: usize| (reach.max(0.5) * n as f64).floor() as i64;
+                let (kx, ky) = (k(wc), k(hc));
+                let all: f64 = (-kx..=kx)
                     .into_par_iter()
-                    .map(|kx| {
-                        let mult = if kx == 0 || 2 * kx == wf { 1.0 } else { 2.0 };
-                        (0..hf)
-                            .map(|i| mult * source(kx as i64, signed(i, hf)).norm_sqr())
-                            .sum::<f64>()
-                    })
+                    .map(|qx| (-ky..=ky).map(|qy| source(qx, qy).norm_sqr()).sum::<f64>())
                     .sum();
                 let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();
                 passed / all.max(f64::MIN_POSITIVE)
@@ -451,7 +481,7 @@ fn image_one(
             spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
                 for (i, v) in col.iter_mut().enumerate() {
                     let (kx, ky) = (kx as i64, signed(i, hf));
-                    let x = source(kx, ky) * lens(kx, ky)[0];
+                    let x = spectrum_at(kx, ky, 1.0) * lens(kx, ky)[0];
                     *v = Complex32::new(x.re as f32, x.im as f32);
                 }
             });
