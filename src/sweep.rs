@@ -141,10 +141,14 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                     cube_psnr_db: cube.map(|r| r.psnr_db),
                     cube_ssim: cube.map(|r| r.ssim),
                     cube_sam_deg: cube.map(|r| r.sam_deg),
-                    carrier_gain: rep.channels.iter().map(|c| c.carrier_gain).fold(None, |a, g| {
-                        let (lo, hi) = a.unwrap_or((g, g));
-                        Some((lo.min(g), hi.max(g)))
-                    }),
+                    carrier_gain: rep
+                        .channels
+                        .iter()
+                        .map(|c| c.carrier_gain)
+                        .fold(None, |a, g| {
+                            let (lo, hi) = a.unwrap_or((g, g));
+                            Some((lo.min(g), hi.max(g)))
+                        }),
                     seconds: Some(rep.reconstruction_seconds),
                     refused: None,
                 }

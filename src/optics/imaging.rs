@@ -757,22 +757,8 @@ mod tests {
         // order (the first moment about the centroid vanishes), so the difference is the
         // curvature term, far below 10⁻³ here.
         let band = Curve::new("flat", vec![420.0, 680.0], vec![1.0, 1.0]).unwrap();
-        let light = PatternLight::band(&band).unwrap();
-        let lens = LensConfig {
-            na: 0.02,
-            ..Default::default()
-        };
-        let cfg = OpticsConfig {
-            lens: Some(lens.clone()),
-            ..Default::default()
-        };
-        let c = Carrier {
-            fx: 0.25,
-            fy: 0.125,
-            phase_rad: 0.7,
-        };
-        let s = imaged_patterns(&cfg, &[c], &[light], 64, 64).unwrap();
-        let g = dft_at(s.plane(0), 64, 64, 16, 8).norm() / 0.5;
+        let (lens, g) = lens_only_carrier(PatternLight::band(&band).unwrap());
+        let g = g.norm() / 0.5;
         let steps = 2600;
         let mean_otf = (0..steps)
             .map(|i| {
@@ -792,10 +778,9 @@ mod tests {
         assert!(spread > 0.05, "{spread}");
     }
 
-    #[test]
-    fn lens_and_pixel_transfer_scale_the_carrier_by_hand() {
-        // Grey modulator, inverted unit-magnification image, one pixel per mirror: the carrier
-        // amplitude is ½ e^{iφ} times the Airy OTF times sinc(fx)·sinc(fy).
+    /// A grey modulator imaged by an NA 0.02 lens alone (inverted, one pixel per mirror) with
+    /// `light`: the lens and the complex amplitude of the carrier (0.25, 0.125), phase 0.7.
+    fn lens_only_carrier(light: PatternLight) -> (LensConfig, rustfft::num_complex::Complex64) {
         let lens = LensConfig {
             na: 0.02,
             ..Default::default()
@@ -809,8 +794,15 @@ mod tests {
             fy: 0.125,
             phase_rad: 0.7,
         };
-        let s = imaged_patterns(&cfg, &[c], &line(1), 64, 64).unwrap();
-        let g = dft_at(s.plane(0), 64, 64, 16, 8);
+        let s = imaged_patterns(&cfg, &[c], &[light], 64, 64).unwrap();
+        (lens, dft_at(s.plane(0), 64, 64, 16, 8))
+    }
+
+    #[test]
+    fn lens_and_pixel_transfer_scale_the_carrier_by_hand() {
+        // Grey modulator, inverted unit-magnification image, one pixel per mirror: the carrier
+        // amplitude is ½ e^{iφ} times the Airy OTF times sinc(fx)·sinc(fy).
+        let (lens, g) = lens_only_carrier(PatternLight::Line(532.0));
         let t = lens.transfer(13.68, 0.25, 0.125, 532.0);
         assert!(t < 0.9 && t > 0.1, "{t}");
         let want = rustfft::num_complex::Complex64::from_polar(0.5 * t, 0.7);
