@@ -330,15 +330,14 @@ fn image_one(
         && [g.mirror_of(0.0, 0.0), g.mirror_of(1.0, 1.0)]
             .iter()
             .all(|&(u, v)| u.fract() == 0.0 && v.fract() == 0.0);
-    let mut reach = 0.5f64;
-    let (pad, oversample) = match &aperture {
-        None => (1, 1),
+    let (pad, oversample, reach) = match &aperture {
+        None => (1, 1, 0.5),
         Some(ap) => {
             let bins = ap.at_wavelength(l_long).radius * wd.min(hd) as f64;
             let pad = (MIN_PINHOLE_BINS / bins).ceil().max(1.0);
             let (ex, ey) = ap.at_wavelength(l_short).extent();
             // A grey modulator has no replicas: nothing beyond its Nyquist band.
-            reach = if cfg.dmd.is_some() {
+            let reach = if cfg.dmd.is_some() {
                 ex.max(ey)
             } else {
                 ex.max(ey).min(0.5)
@@ -360,7 +359,7 @@ fn image_one(
                     ),
                 ));
             }
-            (pad as usize, os as usize)
+            (pad as usize, os as usize, reach)
         }
     };
     let (wc, hc) = (pad * wd, pad * hd);
@@ -375,9 +374,6 @@ fn image_one(
     }
     let coarse = Fft2::new(wc, hc).forward(&padded);
     let fine = Fft2::new(wf, hf);
-    let scale = (oversample * oversample) as f64;
-    // A grey modulator's band-limited spectrum: the Nyquist bin is split between ±½ when the
-    // fine grid holds both (oversample > 1).
     // A grey modulator's band-limited spectrum. Its Nyquist component is a real cosine: on the
     // frequency lattice of the mask (where ±½ are two points) each half gets half of it; on the
     // grid of the unfiltered path (one bin for both) it is whole.
@@ -392,7 +388,7 @@ fn image_one(
     // DMD, the band-limited target without.
     let spectrum_at = |kx: i64, ky: i64, split: f64| -> Complex64 {
         let v = coarse.at(kx, ky);
-        let v = Complex64::new(v.re as f64, v.im as f64) * scale;
+        let v = Complex64::new(v.re as f64, v.im as f64);
         match &cfg.dmd {
             Some(d) => v * d.mirror_envelope(kx as f64 / wc as f64, ky as f64 / hc as f64),
             None => v * nyquist(kx, wc, split) * nyquist(ky, hc, split),
@@ -411,7 +407,6 @@ fn image_one(
             ]
         })
     };
-    let signed = |i: usize, n: usize| signed_bin(i, n);
     let mut spec = vec![Complex32::default(); (wf / 2 + 1) * hf];
     let throughput = match (&aperture, filter) {
         (Some(ap), Some(f)) => {
@@ -480,7 +475,7 @@ fn image_one(
         _ => {
             spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
                 for (i, v) in col.iter_mut().enumerate() {
-                    let (kx, ky) = (kx as i64, signed(i, hf));
+                    let (kx, ky) = (kx as i64, signed_bin(i, hf));
                     let x = spectrum_at(kx, ky, 1.0) * lens(kx, ky)[0];
                     *v = Complex32::new(x.re as f32, x.im as f32);
                 }
