@@ -314,7 +314,7 @@ pub fn patterns_for(exp: &Experiment, rig: &Rig) -> Result<Option<Cube>> {
         return Ok(None);
     }
     let optics = exp.rig.optics();
-    let lights = optics.pattern_lights(&rig.pattern_spectra()?)?;
+    let lights = rig.pattern_lights(exp)?;
     imaging::imaged_patterns(&optics, &rig.carriers, &lights, rig.width, rig.height).map(Some)
 }
 
@@ -384,7 +384,7 @@ impl Pipeline {
         stages.push(if exp.rig.has_optics() {
             let optics = exp.rig.optics();
             Box::new(ImagedPatternStage {
-                lights: optics.pattern_lights(&rig.pattern_spectra()?)?,
+                lights: rig.pattern_lights(exp)?,
                 optics,
                 carriers: rig.carriers.clone(),
                 width: rig.width,

@@ -389,7 +389,7 @@ fn patterns(
     let materials = specmux::scene::Materials::load(lib)?;
     let rig = specmux::rig::Rig::build(&exp, lib, &materials)?;
     let optics = exp.rig.optics();
-    let lights = optics.pattern_lights(&rig.pattern_spectra()?)?;
+    let lights = rig.pattern_lights(&exp)?;
     if let Some(radii) = study {
         let t = std::time::Instant::now();
         let rows = pr::dither_study(

@@ -2,6 +2,7 @@
 //! spectral basis computed. The forward model, the reconstruction and the controller share it.
 
 use crate::error::{Error, Result};
+use crate::optics::light::PatternLight;
 use crate::optics::wheel::{ColorWheel, Projection};
 use crate::optics::Carrier;
 use crate::scene::{self, Experiment, Materials, Quantity};
@@ -95,6 +96,27 @@ impl Rig {
                 Curve::new(format!("{} light", t.name), wl.clone(), v)
             })
             .collect()
+    }
+
+    /// The light of each pattern under the experiment's optics (`OpticsConfig::pattern_lights`);
+    /// a wheel segment that passes no light on the cube's wavelengths is refused by its key.
+    pub fn pattern_lights(&self, exp: &Experiment) -> Result<Vec<PatternLight>> {
+        let spectra = self.pattern_spectra()?;
+        for (i, c) in spectra.iter().enumerate() {
+            if c.values().iter().all(|&v| v <= 0.0) {
+                return Err(Error::config(
+                    &exp.file,
+                    &format!("rig.wheel.filters[{i}]"),
+                    format!("\"{}\"", self.wheel.filters[i].name),
+                    &format!(
+                        "passes no light on {}–{} nm with this camera and light, so the pattern it forms is dark",
+                        self.grid.start_nm,
+                        self.grid.end_nm()
+                    ),
+                ));
+            }
+        }
+        exp.rig.optics().pattern_lights(&spectra)
     }
 
     /// For a radiance scene lit by L: L at the band centres divided by its mean over the bands

@@ -112,6 +112,28 @@ fn nan_in_a_curve() {
 }
 
 #[test]
+fn a_segment_that_passes_no_light_cannot_form_a_pattern() {
+    // An infrared filter (750–800 nm) on a 400–700 nm rig: its pattern through the 4f filter
+    // would be dark, so the experiment is refused by the filter's key.
+    let d = tmpdir("dark-segment");
+    let s = spectra_copy(&d);
+    std::fs::write(
+        s.join("wheel/ir.csv"),
+        "# test: an infrared long-pass\nwavelength_nm,value\n750,1\n800,1\n",
+    )
+    .unwrap();
+    let toml = format!(
+        "{SMALL}[rig.wheel]\nfilters = [\"wheel/ir\", \"wheel/green\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n[rig.dmd]\n[rig.fourier_filter]\n"
+    );
+    let (ok, err) = simulate(&d, &toml, Some(&s));
+    assert_one_line_error(
+        ok,
+        &err,
+        &["exp.toml", "rig.wheel.filters[0]", "wheel/ir", "no light"],
+    );
+}
+
+#[test]
 fn negative_wavelength_step() {
     let d = tmpdir("step");
     let (ok, err) = simulate(&d, "[scene]\nwavelengths_nm = [400, 700, -10]\n", None);
