@@ -68,7 +68,8 @@ pub fn passed_bins(
     let (l1, l2) = light.support_nm();
     let r = aperture.radius_um;
     let k = aperture.um_per_cycle_nm;
-    let mut found: Vec<(i64, i64, (f64, f64))> = Vec::new();
+    let one = Complex64::new(1.0, 0.0);
+    let mut found: Vec<(i64, i64, (f64, f64), Complex64)> = Vec::new();
     for (j, o) in aperture.openings.iter().enumerate() {
         // Bounding box of the opening as the light's wavelengths see it, in bins.
         let range = |a: f64, b: f64, n: usize| {
@@ -85,7 +86,7 @@ pub fn passed_bins(
         if cells > 64.0 * MAX_PASSED_BINS as f64 {
             return Err(too_many(aperture, cells as usize));
         }
-        let part: Vec<(i64, i64, (f64, f64))> = (x0..=x1)
+        let part: Vec<(i64, i64, (f64, f64), Complex64)> = (x0..=x1)
             .into_par_iter()
             .flat_map_iter(|kx| {
                 let value = &value;
@@ -101,10 +102,11 @@ pub fn passed_bins(
                     if light.moments(lo, hi)[0] <= 0.0 {
                         return None;
                     }
-                    if ill == Illumination::Coherent && value(kx, ky) == Complex64::default() {
-                        return None;
-                    }
-                    Some((kx, ky, (lo, hi)))
+                    let v = match ill {
+                        Illumination::Coherent => value(kx, ky),
+                        Illumination::Incoherent => one,
+                    };
+                    (v != Complex64::default()).then_some((kx, ky, (lo, hi), v))
                 })
             })
             .collect();
@@ -114,9 +116,9 @@ pub fn passed_bins(
         }
     }
     // One entry per bin: the union of its openings' intervals, as disjoint intervals.
-    found.sort_by(|a, b| (a.0, a.1, a.2 .0).partial_cmp(&(b.0, b.1, b.2 .0)).unwrap());
+    found.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2 .0.total_cmp(&b.2 .0)));
     let mut bins: Vec<PassedBin> = Vec::with_capacity(found.len());
-    for (kx, ky, (lo, hi)) in found {
+    for (kx, ky, (lo, hi), value) in found {
         if let Some(b) = bins.last_mut().filter(|b| (b.kx, b.ky) == (kx, ky)) {
             let last = &mut b.ivs[b.n - 1];
             if lo <= last.hi {
@@ -134,10 +136,7 @@ pub fn passed_bins(
         bins.push(PassedBin {
             kx,
             ky,
-            value: match ill {
-                Illumination::Coherent => value(kx, ky),
-                Illumination::Incoherent => Complex64::new(1.0, 0.0),
-            },
+            value,
             weight: 0.0,
             ivs: [
                 Interval {
