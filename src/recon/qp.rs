@@ -52,8 +52,6 @@ pub struct Unmixer {
     /// B by columns: `bt[j][k]` = basis vector j at band k (the spectrum Bα as a sum of
     /// scaled columns, which vectorises over the bands).
     bt: Vec<[f64; MAX_BANDS]>,
-    /// The rows of B padded to MAX_BASIS with zeros (fixed-size kernels of the dual solver).
-    b8: Vec<[f64; MAX_BASIS]>,
     /// 1/‖b_k‖ for each row of B (normalises the violation of band k; 0 for a zero row,
     /// which no α can violate).
     b_inv_norm: Vec<f64>,
@@ -178,10 +176,6 @@ impl Unmixer {
             bt: b
                 .column_iter()
                 .map(|col| std::array::from_fn(|k| if k < m { col[k] } else { 0.0 }))
-                .collect(),
-            b8: b
-                .row_iter()
-                .map(|row| std::array::from_fn(|j| if j < n { row[j] } else { 0.0 }))
                 .collect(),
             b_inv_norm: b
                 .row_iter()

@@ -128,7 +128,8 @@ impl Unmixer {
                 }
             }
             let Some(p) = p else { break };
-            let bp = &self.b8[p];
+            // Row p of B, zero-padded for the fixed-size kernels.
+            let bp: &Vector = &std::array::from_fn(|j| self.bt.get(j).map_or(0.0, |c| c[p]));
             let mut mu_p = 0.0;
             // Step 2: move towards satisfying band p, dropping bands whose multiplier reaches 0.
             loop {
