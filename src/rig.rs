@@ -99,12 +99,14 @@ impl Rig {
     }
 
     /// The light of each pattern under the experiment's optics (`OpticsConfig::pattern_lights`);
-    /// a wheel segment that passes no light on the cube's wavelengths is refused by its key.
+    /// a band that passes no light on the cube's wavelengths is refused by its segment's key (a
+    /// laser line does not need the segment's light to form its pattern).
     pub fn pattern_lights(&self, exp: &Experiment) -> Result<Vec<PatternLight>> {
         let spectra = self.pattern_spectra()?;
-        for (i, c) in spectra.iter().enumerate() {
-            if c.values().iter().all(|&v| v <= 0.0) {
-                return Err(Error::config(
+        // A band that carries no power cannot form a pattern: name the segment's key.
+        exp.rig.optics().pattern_lights(&spectra).map_err(|e| {
+            match spectra.iter().position(|c| c.values().iter().all(|&v| v <= 0.0)) {
+                Some(i) => Error::config(
                     &exp.file,
                     &format!("rig.wheel.filters[{i}]"),
                     format!("\"{}\"", self.wheel.filters[i].name),
@@ -113,10 +115,10 @@ impl Rig {
                         self.grid.start_nm,
                         self.grid.end_nm()
                     ),
-                ));
+                ),
+                None => e,
             }
-        }
-        exp.rig.optics().pattern_lights(&spectra)
+        })
     }
 
     /// For a radiance scene lit by L: L at the band centres divided by its mean over the bands
