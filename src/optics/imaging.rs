@@ -798,7 +798,7 @@ mod tests {
         // Grey modulator, inverted unit-magnification image, one pixel per mirror: the carrier
         // amplitude is ½ e^{iφ} times the Airy OTF times sinc(fx)·sinc(fy).
         let (lens, g) = lens_only_carrier(PatternLight::Line(532.0));
-        let t = lens.transfer(13.68, 0.25, 0.125, 532.0);
+        let t = lens.airy(13.68, 0.25, 0.125, 532.0) * lens.pixel_transfer(13.68, 0.25, 0.125);
         assert!(t < 0.9 && t > 0.1, "{t}");
         let want = rustfft::num_complex::Complex64::from_polar(0.5 * t, 0.7);
         assert!((g - want).norm() < 1e-4, "{g} vs {want}");

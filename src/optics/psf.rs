@@ -111,11 +111,6 @@ impl LensConfig {
         }
         -4.0 / std::f64::consts::PI * (1.0 - nu * nu).sqrt() * nu / wavelength_nm
     }
-
-    /// Lens and pixel box together for monochromatic light.
-    pub fn transfer(&self, pitch_um: f64, fx: f64, fy: f64, wavelength_nm: f64) -> f64 {
-        self.airy(pitch_um, fx, fy, wavelength_nm) * self.pixel_transfer(pitch_um, fx, fy)
-    }
 }
 
 #[cfg(test)]
