@@ -6,11 +6,13 @@
 use criterion::Criterion;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
-use specmux::optics::carriers::default_layout;
-use specmux::recon::gap::{Gap, GapConfig, Method};
-use specmux::recon::Demux;
-use specmux::scene::dead_leaves;
-use specmux::Cube;
+use specmux_core::carriers::default_layout;
+use specmux_core::demux::Demux;
+use specmux_core::gap::Gap;
+use specmux_core::gap::GapConfig;
+use specmux_core::gap::Method;
+use specmux_core::Cube;
+use specmux_twin::scene::dead_leaves;
 use std::time::Instant;
 
 const N: usize = 768;

@@ -2,12 +2,14 @@
 //! Floyd–Steinberg and in-band-feedback dithering, coherent 4f filtering of each wheel band
 //! (streaks, exact over λ) and of a 532 nm line, lens and pixels.
 use criterion::{criterion_group, criterion_main, Criterion};
-use specmux::optics::dither::DitherMethod;
-use specmux::optics::fourier_filter::Light;
-use specmux::optics::imaging::{imaged_patterns, OpticsConfig};
-use specmux::rig::Rig;
-use specmux::scene::{Experiment, Materials};
-use specmux::spectral::Library;
+use specmux_core::spectral::Library;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::optics::dither::DitherMethod;
+use specmux_twin::optics::fourier_filter::Light;
+use specmux_twin::optics::imaging::imaged_patterns;
+use specmux_twin::optics::imaging::OpticsConfig;
+use specmux_twin::rig::Rig;
+use specmux_twin::scene::Materials;
 
 fn patterns(c: &mut Criterion) {
     let lib = Library::default_root();

@@ -4,11 +4,12 @@
 //! output cube per frame and with one kept from frame to frame.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use specmux::forward::Pipeline;
-use specmux::recon::Reconstructor;
-use specmux::rig::Rig;
-use specmux::scene::{Experiment, Materials};
-use specmux::spectral::Library;
+use specmux_core::spectral::Library;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::Pipeline;
+use specmux_twin::rig::Rig;
+use specmux_twin::run;
+use specmux_twin::scene::Materials;
 
 fn bench(c: &mut Criterion) {
     let lib = Library::default_root();
@@ -30,8 +31,8 @@ fn bench(c: &mut Criterion) {
             .unwrap()
             .run()
             .unwrap();
-        let frame = state.frame.unwrap();
-        let recon = Reconstructor::new(&exp, &rig, state.patterns.as_ref()).unwrap();
+        let frame = state.frame.clone();
+        let recon = run::reconstructor(&exp, &rig, &state).unwrap();
         let xhat = recon.demultiplex(&frame).unwrap();
         let (_, stats) = recon.unmix(&xhat).unwrap();
         eprintln!("{name}: {stats:?}");

@@ -2,8 +2,9 @@
 //! photon-transfer chain of `Sensor::capture` with the default GO-5000-class parameters.
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
-use specmux::sensor::{Sensor, SensorConfig};
-use specmux::Cube;
+use specmux_core::Cube;
+use specmux_twin::sensor::Sensor;
+use specmux_twin::sensor::SensorConfig;
 
 fn capture(c: &mut Criterion) {
     let (w, h) = (768, 768);

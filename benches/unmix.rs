@@ -4,11 +4,12 @@
 //! of a 768×768×31 cube.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use specmux::forward::Pipeline;
-use specmux::recon::Reconstructor;
-use specmux::rig::Rig;
-use specmux::scene::{Experiment, Materials};
-use specmux::spectral::Library;
+use specmux_core::spectral::Library;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::Pipeline;
+use specmux_twin::rig::Rig;
+use specmux_twin::run;
+use specmux_twin::scene::Materials;
 
 fn bench(c: &mut Criterion) {
     let exp = Experiment::prototype();
@@ -19,10 +20,10 @@ fn bench(c: &mut Criterion) {
         .unwrap()
         .run()
         .unwrap();
-    let recon = Reconstructor::new(&exp, &rig, state.patterns.as_ref()).unwrap();
-    let channels = state.channels.unwrap();
-    let xhat = recon.demultiplex(&state.frame.unwrap()).unwrap();
-    let truth = state.scene.unwrap().cube;
+    let recon = run::reconstructor(&exp, &rig, &state).unwrap();
+    let channels = state.channels;
+    let xhat = recon.demultiplex(&state.frame).unwrap();
+    let truth = state.scene.cube;
     let mut g = c.benchmark_group("unmix 768x768 6ch to 31 bands");
     g.sample_size(20);
     for (name, x) in [("true channels", &channels), ("fourier estimates", &xhat)] {
@@ -35,7 +36,7 @@ fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("metrics");
     g.sample_size(10);
     g.bench_function("compare_768x768x31", |b| {
-        b.iter(|| specmux::metrics::compare(&truth, &cube).unwrap())
+        b.iter(|| specmux_core::metrics::compare(&truth, &cube).unwrap())
     });
     g.finish();
 }

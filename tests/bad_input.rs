@@ -143,11 +143,11 @@ fn negative_wavelength_step() {
 #[test]
 fn exr_with_the_wrong_channel_count() {
     let d = tmpdir("exr");
-    let cube = specmux::Cube::zeros(64, 64, 5);
+    let cube = specmux_core::Cube::zeros(64, 64, 5);
     let names: Vec<String> = (0..5)
-        .map(|k| specmux::scene::exr_io::band_name(400.0 + 10.0 * k as f64))
+        .map(|k| specmux_io::exr::band_name(400.0 + 10.0 * k as f64))
         .collect();
-    specmux::scene::exr_io::write(&d.join("five.exr"), &cube, &names).unwrap();
+    specmux_io::exr::write(&d.join("five.exr"), &cube, &names).unwrap();
     let toml = format!("{SMALL}source = \"exr:five.exr\"\nquantity = \"radiance\"\n");
     let (ok, err) = simulate(&d, &toml, None);
     assert_one_line_error(ok, &err, &["five.exr", "5 channels", "31 bands"]);

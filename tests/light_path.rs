@@ -2,11 +2,14 @@
 //! built, the timing weights and the camera reach the frame, and the reconstruction undoes
 //! both (crosstalk inverse, dark/flat calibration).
 
-use specmux::forward::Pipeline;
-use specmux::recon::Reconstructor;
-use specmux::rig::Rig;
-use specmux::scene::{Cube, Experiment, Materials};
-use specmux::spectral::Library;
+use specmux_core::reconstructor::Reconstructor;
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::Pipeline;
+use specmux_twin::rig::Rig;
+use specmux_twin::run;
+use specmux_twin::scene::Materials;
 
 const SEGMENT_S: f64 = 1e-3 / 6.0;
 
@@ -26,6 +29,13 @@ fn setup(exp: &Experiment) -> (Rig, Materials) {
     let lib = Library::default_root();
     let materials = Materials::load(&lib).unwrap();
     (Rig::build(exp, &lib, &materials).unwrap(), materials)
+}
+
+/// The reconstructor the core builds for `exp` from the twin's calibration captures.
+fn reconstructor(exp: &Experiment) -> specmux_core::Result<Reconstructor> {
+    let (rig, m) = setup(exp);
+    let (sim, _) = Pipeline::build(exp, &rig, &m)?.run()?;
+    run::reconstructor(exp, &rig, &sim)
 }
 
 fn delays(fraction: f64) -> String {
@@ -84,7 +94,7 @@ fn timing_weights_mix_the_channels_into_the_frame() {
     let exp = experiment(&format!("[rig.timing]\n{}", delays(0.3)));
     let (rig, m) = setup(&exp);
     let (st, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
-    let w = specmux::timing::weights(exp.rig.timing.as_ref().unwrap())
+    let w = specmux_twin::timing::weights(exp.rig.timing.as_ref().unwrap())
         .unwrap()
         .w;
     assert!(
@@ -95,11 +105,7 @@ fn timing_weights_mix_the_channels_into_the_frame() {
         (w[0][5] - 0.3).abs() < 1e-6 && w[0][1].abs() < 1e-9,
         "{w:?}"
     );
-    let (x, s, y) = (
-        st.channels.unwrap(),
-        st.patterns.unwrap(),
-        st.frame.unwrap(),
-    );
+    let (x, s, y) = (st.channels, st.patterns, st.frame);
     for p in (0..x.pixels()).step_by(97) {
         let want: f64 = (0..6)
             .map(|k| {
@@ -138,7 +144,7 @@ fn crosstalk_correction_undoes_a_dmd_delay() {
             delays(0.25)
         ));
         let (rig, _) = setup(&exp);
-        let wts = specmux::timing::weights(exp.rig.timing.as_ref().unwrap())
+        let wts = specmux_twin::timing::weights(exp.rig.timing.as_ref().unwrap())
             .unwrap()
             .w;
         let mut y = vec![0f32; w * h];
@@ -149,7 +155,7 @@ fn crosstalk_correction_undoes_a_dmd_delay() {
                 y[p] += (z * s[p] as f64) as f32;
             }
         }
-        let r = Reconstructor::new(&exp, &rig, None).unwrap();
+        let r = reconstructor(&exp).unwrap();
         r.run(&Cube::from_vec(w, h, 1, y).unwrap(), None)
             .unwrap()
             .xhat
@@ -166,14 +172,13 @@ fn crosstalk_correction_undoes_a_dmd_delay() {
 #[test]
 fn a_singular_crosstalk_is_refused_not_inverted() {
     let exp = experiment(&format!("[rig.timing]\n{}", delays(0.5)));
-    let (rig, _) = setup(&exp);
-    let err = Reconstructor::new(&exp, &rig, None).err().expect("refused");
+    let err = reconstructor(&exp).err().expect("refused");
     assert!(err.to_string().contains("ill-conditioned"), "{err}");
     let exp = experiment(&format!(
         "[rig.timing]\n{}[reconstruct]\ncrosstalk = \"none\"\n",
         delays(0.5)
     ));
-    assert!(Reconstructor::new(&exp, &rig, None).is_ok());
+    assert!(reconstructor(&exp).is_ok());
 }
 
 /// A raw frame (DN, with offset, PRNU, DSNU and noise) is brought back to the noiseless frame's
@@ -184,7 +189,7 @@ fn raw_frames_are_calibrated_back_to_the_noiseless_frame() {
         let exp = experiment("");
         let (rig, m) = setup(&exp);
         let (st, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
-        (st.frame.unwrap(), st.full_scale)
+        (st.frame, st.full_scale)
     };
     let exp = experiment(
         "[rig.sensor]\nfull_well_e = 200000\nbits = 16\nelectrons_at_full_scale = 50000\n",
@@ -192,16 +197,25 @@ fn raw_frames_are_calibrated_back_to_the_noiseless_frame() {
     let (rig, m) = setup(&exp);
     let (st, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
     assert!(st.raw);
-    let raw = st.frame.unwrap();
+    let raw = st.frame;
     assert!(
         raw.data.iter().all(|v| v.fract() == 0.0),
         "raw frames hold integer DN"
     );
-    let r = Reconstructor::new(&exp, &rig, None).unwrap();
-    let cal = r.prepare(&raw).unwrap();
+    let r = reconstructor(&exp).unwrap();
+    let mut cal = r.calibration.linearise(&raw).unwrap();
     let (y, fs) = noiseless;
+    // Linear units are DN above dark at the flat's mean gain: y · K · e⁻(full scale) / full scale.
     let mean = |c: &[f32]| c.iter().map(|v| *v as f64).sum::<f64>() / c.len() as f64;
-    assert!((mean(&cal.data) / mean(&y.data) - 1.0).abs() < 5e-3);
+    let k = exp.rig.sensor.as_ref().unwrap().gain_dn_per_e;
+    let scale = mean(&cal.data) / mean(&y.data);
+    assert!(
+        (scale / (k * 50_000.0 / fs as f64) - 1.0).abs() < 5e-3,
+        "{scale}"
+    );
+    cal.data
+        .iter_mut()
+        .for_each(|v| *v = (*v as f64 / scale) as f32);
     // Shot noise: σ/y = 1/√(y·e_fs/fs) per pixel; the flat's own noise averages over 16 frames.
     let e_per_unit = 50_000.0 / fs as f64;
     let expected: f64 = (y.data.iter().map(|v| *v as f64 / e_per_unit).sum::<f64>()

@@ -3,13 +3,19 @@
 //! the truth cube must reproduce Mitsuba's wheel channels within the Monte Carlo noise of their
 //! difference. Print the table with `cargo test --test mitsuba -- --nocapture`.
 
-use specmux::optics::wheel::ColorWheel;
-use specmux::recon::Reconstructor;
-use specmux::rig::Rig;
-use specmux::scene::experiment::WheelConfig;
-use specmux::scene::mitsuba::{self, WHEEL_CHANNELS};
-use specmux::scene::{Cube, Experiment, Materials};
-use specmux::spectral::{integrate_product, Curve, Grid, Library};
+use specmux_core::reconstructor;
+use specmux_core::spectral::integrate_product;
+use specmux_core::spectral::Curve;
+use specmux_core::spectral::Grid;
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::optics::wheel::ColorWheel;
+use specmux_twin::optics::wheel::WheelConfig;
+use specmux_twin::rig::Rig;
+use specmux_twin::scene::mitsuba;
+use specmux_twin::scene::mitsuba::WHEEL_CHANNELS;
+use specmux_twin::scene::Materials;
 use std::path::{Path, PathBuf};
 
 const SCENES: [&str; 3] = ["chart", "cornell", "strips"];
@@ -211,8 +217,8 @@ fn held_out_radiance_error(illuminant: &str) -> f64 {
         .map(|w| w.iter().cloned().collect())
         .collect();
     let x = r.mix(&rows).unwrap();
-    let recon = Reconstructor::new(&exp, &rig, None).unwrap();
-    let (rhat, _) = recon.unmix(&x).unwrap();
+    let unmixer = reconstructor::unmixer(&exp.reconstruct, &rig.design()).unwrap();
+    let (rhat, _) = unmixer.unmix(&x).unwrap();
     let err: f64 = rhat
         .data
         .iter()

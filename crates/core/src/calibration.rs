@@ -1,0 +1,348 @@
+//! Calibration from captured frames, as on the real rig: dark and flat frames correct the
+//! raw frames (dark removes black offset, dark current and DSNU; flat removes PRNU and
+//! vignetting), and a capture of each pattern on a uniform white target gives the carrier's
+//! frequency, phase and complex amplitude and the pattern as imaged (for GAP). Nothing here
+//! knows how the frames were made: the twin simulates the same captures (twin::captures).
+
+use crate::carriers::Carrier;
+use crate::error::Error;
+use crate::error::Result;
+use crate::fft::{dtft_at, Fft2, HalfSpectrum};
+use crate::Cube;
+use rayon::prelude::*;
+use rustfft::num_complex::{Complex32, Complex64};
+use serde::Serialize;
+
+/// The frames a calibration captures, each the mean of `frames_averaged` exposures.
+#[derive(Clone, Debug)]
+pub struct CalibrationFrames {
+    /// Dark frame (no light); None for a frame already in linear units (no camera modelled).
+    pub dark: Option<Cube>,
+    /// Flat frame (uniform target, every mirror on); None with `dark`.
+    pub flat: Option<Cube>,
+    /// One plane per pattern k: the white target while the DMD shows pattern k in its own
+    /// wheel segment's slot and is dark in the others.
+    pub patterns: Cube,
+    /// True when `patterns` are already in linear units (the oracle), so the dark/flat
+    /// correction is not applied to them again.
+    pub patterns_linear: bool,
+    pub frames_averaged: usize,
+    /// What made the frames: "captures" (simulated or real) or "oracle" (the simulator's exact
+    /// patterns and weights, noiseless — for comparison only).
+    pub source: String,
+}
+
+/// One carrier as the calibration measured it.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MeasuredCarrier {
+    /// Frequency (cycles/px) and phase at pixel (0, 0) of the e^{+iω·p} term.
+    pub carrier: Carrier,
+    /// Complex amplitude of that term in the white-target capture (frame units).
+    pub amplitude: [f64; 2],
+    /// Mean of the white-target capture: the white level of this pattern's slot.
+    pub white_level: f64,
+    /// Shift from the design carrier, in cycles/px.
+    pub shift: [f64; 2],
+}
+
+impl MeasuredCarrier {
+    pub fn amplitude(&self) -> Complex64 {
+        Complex64::new(self.amplitude[0], self.amplitude[1])
+    }
+}
+
+/// Dark and flat frames that turn raw DN into linear frame units.
+#[derive(Clone, Debug)]
+pub struct DarkFlat {
+    pub dark: Cube,
+    pub flat: Cube,
+}
+
+impl DarkFlat {
+    pub fn apply(&self, raw: &Cube) -> Result<Cube> {
+        if raw.planes == 1 {
+            return calibrate(raw, &self.dark, &self.flat);
+        }
+        // A stack of planes (the pattern captures): each plane against the same frames.
+        let mut out = Cube::zeros(raw.width, raw.height, raw.planes);
+        for k in 0..raw.planes {
+            let c = calibrate(&raw.extract(k), &self.dark, &self.flat)?;
+            out.plane_mut(k).copy_from_slice(&c.data);
+        }
+        Ok(out)
+    }
+}
+
+/// What the reconstruction knows of the rig beyond its design: measured carriers, the white-
+/// target captures (linear units) and the dark/flat correction.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    pub dark_flat: Option<DarkFlat>,
+    pub carriers: Vec<MeasuredCarrier>,
+    /// P_k: the white-target capture of each pattern, dark/flat corrected.
+    pub patterns: Cube,
+    pub source: String,
+}
+
+/// Sub-bin search for a carrier's frequency: the white-target capture's DTFT magnitude is
+/// maximised within ± this many bins of the strongest bin near the design carrier.
+const SEARCH_BINS: i64 = 2;
+
+impl Calibration {
+    /// Estimate every carrier from the captures. `design` gives where to look: the strongest
+    /// bin within `radius_bins` of each design carrier (never the DC bin), then sub-bin refined.
+    pub fn from_frames(
+        design: &[Carrier],
+        frames: &CalibrationFrames,
+        radius_bins: usize,
+    ) -> Result<Calibration> {
+        let p = &frames.patterns;
+        if p.planes != design.len() {
+            return Err(Error::Shape(format!(
+                "{} pattern captures for {} carriers",
+                p.planes,
+                design.len()
+            )));
+        }
+        let dark_flat = match (&frames.dark, &frames.flat) {
+            (Some(d), Some(f)) => Some(DarkFlat {
+                dark: d.clone(),
+                flat: f.clone(),
+            }),
+            (None, None) => None,
+            _ => {
+                return Err(Error::Shape(
+                    "calibration: a dark frame needs a flat frame and the reverse".into(),
+                ))
+            }
+        };
+        let patterns = match (&dark_flat, frames.patterns_linear) {
+            (Some(df), false) => df.apply(p)?,
+            _ => p.clone(),
+        };
+        if !patterns.all_finite() {
+            return Err(Error::Numerical(
+                "calibration: the pattern captures contain NaN or infinite values".into(),
+            ));
+        }
+        let fft = Fft2::new(p.width, p.height);
+        let carriers = design
+            .par_iter()
+            .enumerate()
+            .map(|(k, c)| measure_carrier(&fft, &patterns, k, c, radius_bins))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Calibration {
+            dark_flat,
+            carriers,
+            patterns,
+            source: frames.source.clone(),
+        })
+    }
+
+    /// A raw frame in linear units (dark/flat corrected when the rig has a camera).
+    pub fn linearise(&self, raw: &Cube) -> Result<Cube> {
+        match &self.dark_flat {
+            Some(df) => df.apply(raw),
+            None => Ok(raw.clone()),
+        }
+    }
+}
+
+/// Frequency, phase and amplitude of pattern `k`'s carrier in its white-target capture.
+fn measure_carrier(
+    fft: &Fft2,
+    patterns: &Cube,
+    k: usize,
+    design: &Carrier,
+    radius_bins: usize,
+) -> Result<MeasuredCarrier> {
+    let (w, h) = (patterns.width, patterns.height);
+    let plane = patterns.plane(k);
+    let white_level = plane.iter().map(|&v| v as f64).sum::<f64>() / plane.len() as f64;
+    let spec = fft.forward(plane);
+    let (bx, by) = (Carrier::bin(design.fx, w), Carrier::bin(design.fy, h));
+    let r = radius_bins as i64;
+    let mut best = (bx, by, -1.0f32);
+    for dy in -r..=r {
+        for dx in -r..=r {
+            let (kx, ky) = (bx + dx, by + dy);
+            if (kx.rem_euclid(w as i64), ky.rem_euclid(h as i64)) == (0, 0) {
+                continue;
+            }
+            let m = spec.at(kx, ky).norm();
+            if m > best.2 {
+                best = (kx, ky, m);
+            }
+        }
+    }
+    let (fx0, fy0) = (best.0 as f64 / w as f64, best.1 as f64 / h as f64);
+    let (fx, fy) = if off_grid(&spec, best.0, best.1) {
+        refine_peak(plane, w, h, fx0, fy0)
+    } else {
+        (fx0, fy0)
+    };
+    let a = dtft_at(plane, w, h, fx, fy);
+    if !(a.norm() > 1e-6 * white_level.abs().max(f64::MIN_POSITIVE)) {
+        return Err(Error::Numerical(format!(
+            "calibration: pattern {k}'s capture carries no carrier near ({}, {}) cycles/px              (amplitude {:.3e} against a white level {white_level:.3e}); it cannot be demultiplexed",
+            design.fx,
+            design.fy,
+            a.norm()
+        )));
+    }
+    Ok(MeasuredCarrier {
+        carrier: Carrier {
+            fx,
+            fy,
+            phase_rad: a.arg(),
+        },
+        amplitude: [a.re, a.im],
+        white_level,
+        shift: [fx - design.fx, fy - design.fy],
+    })
+}
+
+/// True when the peak at bin (kx, ky) leaks into its neighbours as an off-grid tone does:
+/// the three-bin interpolation (Jacobsen) puts the true peak over 1e-3 bins away on an axis.
+fn off_grid(spec: &HalfSpectrum, kx: i64, ky: i64) -> bool {
+    let offset = |m: Complex32, c: Complex32, p: Complex32| {
+        let den = c * 2.0 - m - p;
+        if den.norm() == 0.0 {
+            0.0
+        } else {
+            ((m - p) / den).re.abs()
+        }
+    };
+    let c = spec.at(kx, ky);
+    let dx = offset(spec.at(kx - 1, ky), c, spec.at(kx + 1, ky));
+    let dy = offset(spec.at(kx, ky - 1), c, spec.at(kx, ky + 1));
+    dx > 1e-3 || dy > 1e-3
+}
+
+/// The frequency near (fx0, fy0) (cycles/px) where |DTFT| peaks, within ±`SEARCH_BINS`/2
+/// bins, by golden-section search along x then y, twice. On-grid peaks stay exactly on the bin.
+fn refine_peak(plane: &[f32], w: usize, h: usize, fx0: f64, fy0: f64) -> (f64, f64) {
+    let mag = |fx: f64, fy: f64| dtft_at(plane, w, h, fx, fy).norm();
+    let (mut fx, mut fy) = (fx0, fy0);
+    let half = SEARCH_BINS as f64 / 2.0;
+    for _ in 0..2 {
+        fx = golden_max(|f| mag(f, fy), fx0 - half / w as f64, fx0 + half / w as f64);
+        fy = golden_max(|f| mag(fx, f), fy0 - half / h as f64, fy0 + half / h as f64);
+    }
+    // Keep the exact bin when refinement gains nothing measurable (an on-grid carrier).
+    if mag(fx0, fy0) >= mag(fx, fy) * (1.0 - 1e-9) {
+        (fx0, fy0)
+    } else {
+        (fx, fy)
+    }
+}
+
+/// Maximiser of a unimodal `f` on [a, b] to 1e-6 of the interval.
+fn golden_max(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
+    let (mut fc, mut fd) = (f(c), f(d));
+    let tol = 1e-6 * (b - a);
+    while b - a > tol {
+        if fc > fd {
+            b = d;
+            (d, fd) = (c, fc);
+            c = b - g * (b - a);
+            fc = f(c);
+        } else {
+            a = c;
+            (c, fc) = (d, fd);
+            d = a + g * (b - a);
+            fd = f(d);
+        }
+    }
+    0.5 * (a + b)
+}
+
+/// (raw − dark) / (flat − dark) × mean(flat − dark), plane by plane. Refuses a flat that is not
+/// brighter than the dark frame at some pixel instead of dividing by zero or by a negative.
+pub fn calibrate(raw: &Cube, dark: &Cube, flat: &Cube) -> Result<Cube> {
+    raw.check_same_shape(dark, "calibrate: raw frame against dark frame")?;
+    raw.check_same_shape(flat, "calibrate: raw frame against flat frame")?;
+    for (what, c) in [("raw", raw), ("dark", dark), ("flat", flat)] {
+        if let Some(i) = c.data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "calibrate: {what} frame holds {} at index {i}",
+                c.data[i]
+            )));
+        }
+    }
+    let n = raw.pixels();
+    let mut out = Cube::zeros(raw.width, raw.height, raw.planes);
+    for k in 0..raw.planes {
+        let (r, d, f) = (raw.plane(k), dark.plane(k), flat.plane(k));
+        if let Some(i) = (0..n).find(|&i| f[i] <= d[i]) {
+            return Err(Error::Numerical(format!(
+                "calibrate: flat − dark = {} DN at pixel ({}, {}) of plane {k}; the flat must be \
+                 brighter than the dark frame at every pixel (take the flat with more light)",
+                f[i] - d[i],
+                i % raw.width,
+                i / raw.width
+            )));
+        }
+        let mean_response = f
+            .iter()
+            .zip(d)
+            .map(|(&f, &d)| f as f64 - d as f64)
+            .sum::<f64>()
+            / n as f64;
+        for (i, o) in out.plane_mut(k).iter_mut().enumerate() {
+            let response = f[i] as f64 - d[i] as f64;
+            *o = ((r[i] as f64 - d[i] as f64) / response * mean_response) as f32;
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_case() {
+        // Two pixels: dark 10 and 12 DN, flat response 100 and 50 DN above dark (gain 2:1).
+        let dark = Cube::from_vec(2, 1, 1, vec![10.0, 12.0]).unwrap();
+        let flat = Cube::from_vec(2, 1, 1, vec![110.0, 62.0]).unwrap();
+        let raw = Cube::from_vec(2, 1, 1, vec![60.0, 37.0]).unwrap();
+        let out = calibrate(&raw, &dark, &flat).unwrap();
+        // (60−10)/100·75 = 37.5 and (37−12)/50·75 = 37.5.
+        assert_eq!(out.data, vec![37.5, 37.5]);
+        // The flat itself becomes its mean response everywhere.
+        let flat_out = calibrate(&flat, &dark, &flat).unwrap();
+        assert_eq!(flat_out.data, vec![75.0, 75.0]);
+    }
+
+    #[test]
+    fn is_linear_in_the_raw_signal_above_dark() {
+        let dark = Cube::from_vec(3, 1, 1, vec![5.0, 6.0, 7.0]).unwrap();
+        let flat = Cube::from_vec(3, 1, 1, vec![105.0, 86.0, 207.0]).unwrap();
+        let a = Cube::from_vec(3, 1, 1, vec![15.0, 26.0, 47.0]).unwrap();
+        let mut b = a.clone();
+        for (v, d) in b.data.iter_mut().zip(&dark.data) {
+            *v = 3.0 * (*v - d) + d;
+        }
+        let (ca, cb) = (
+            calibrate(&a, &dark, &flat).unwrap(),
+            calibrate(&b, &dark, &flat).unwrap(),
+        );
+        for (x, y) in ca.data.iter().zip(&cb.data) {
+            assert!((3.0 * x - y).abs() < 1e-4 * y.abs(), "{x} {y}");
+        }
+    }
+
+    #[test]
+    fn refuses_a_dark_flat_pixel() {
+        let dark = Cube::from_vec(2, 2, 1, vec![10.0; 4]).unwrap();
+        let flat = Cube::from_vec(2, 2, 1, vec![50.0, 50.0, 10.0, 50.0]).unwrap();
+        let raw = flat.clone();
+        let msg = calibrate(&raw, &dark, &flat).unwrap_err().to_string();
+        assert!(msg.contains("pixel (0, 1)"), "{msg}");
+        let bad_shape = Cube::zeros(2, 1, 1);
+        assert!(calibrate(&bad_shape, &dark, &flat).is_err());
+    }
+}

@@ -1,0 +1,148 @@
+//! The one array type of the crate: `planes` images of `width × height` f32 pixels, row-major,
+//! one contiguous plane per channel. A frame is a cube with one plane.
+
+use crate::error::Error;
+use crate::error::Result;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cube {
+    pub width: usize,
+    pub height: usize,
+    pub planes: usize,
+    pub data: Vec<f32>,
+}
+
+impl Cube {
+    /// A cube of zeros.
+    pub fn zeros(width: usize, height: usize, planes: usize) -> Cube {
+        Cube {
+            width,
+            height,
+            planes,
+            data: vec![0.0; width * height * planes],
+        }
+    }
+
+    /// A cube from its data, checked for size.
+    pub fn from_vec(width: usize, height: usize, planes: usize, data: Vec<f32>) -> Result<Cube> {
+        if data.len() != width * height * planes {
+            return Err(Error::Shape(format!(
+                "{} values for {width}×{height}×{planes}",
+                data.len()
+            )));
+        }
+        Ok(Cube {
+            width,
+            height,
+            planes,
+            data,
+        })
+    }
+
+    /// Pixels per plane.
+    pub fn pixels(&self) -> usize {
+        self.width * self.height
+    }
+
+    pub fn plane(&self, k: usize) -> &[f32] {
+        let n = self.pixels();
+        &self.data[k * n..(k + 1) * n]
+    }
+
+    pub fn plane_mut(&mut self, k: usize) -> &mut [f32] {
+        let n = self.pixels();
+        &mut self.data[k * n..(k + 1) * n]
+    }
+
+    /// Mutable views of all planes at once (for filling planes in parallel).
+    pub fn planes_mut(&mut self) -> std::slice::ChunksExactMut<'_, f32> {
+        let n = self.pixels();
+        self.data.chunks_exact_mut(n.max(1))
+    }
+
+    /// A one-plane cube holding plane `k`.
+    pub fn extract(&self, k: usize) -> Cube {
+        Cube {
+            width: self.width,
+            height: self.height,
+            planes: 1,
+            data: self.plane(k).to_vec(),
+        }
+    }
+
+    /// The spectrum (one value per plane) at pixel `(x, y)`.
+    pub fn spectrum(&self, x: usize, y: usize) -> Vec<f32> {
+        let p = y * self.width + x;
+        (0..self.planes).map(|k| self.plane(k)[p]).collect()
+    }
+
+    /// Same width, height and plane count.
+    pub fn check_same_shape(&self, other: &Cube, what: &str) -> Result<()> {
+        if (self.width, self.height, self.planes) != (other.width, other.height, other.planes) {
+            return Err(Error::Shape(format!(
+                "{what}: {}×{}×{} against {}×{}×{}",
+                self.width, self.height, self.planes, other.width, other.height, other.planes
+            )));
+        }
+        Ok(())
+    }
+
+    /// Largest value (f32::MIN for an empty cube).
+    pub fn max(&self) -> f32 {
+        self.data.iter().cloned().fold(f32::MIN, f32::max)
+    }
+
+    /// True when every value is finite.
+    pub fn all_finite(&self) -> bool {
+        self.data.iter().all(|v| v.is_finite())
+    }
+
+    /// Linear map across planes: out_k = Σ_j m[k][j] · in_j, pixel by pixel (m is planes_out × planes_in).
+    pub fn mix(&self, m: &[Vec<f64>]) -> Result<Cube> {
+        if m.iter().any(|row| row.len() != self.planes) {
+            return Err(Error::Shape(format!(
+                "mixing matrix rows must have {} entries",
+                self.planes
+            )));
+        }
+        let mut out = Cube::zeros(self.width, self.height, m.len());
+        use rayon::prelude::*;
+        out.data
+            .par_chunks_mut(self.pixels().max(1))
+            .zip(m.par_iter())
+            .for_each(|(dst, row)| {
+                for (j, &w) in row.iter().enumerate() {
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let w = w as f32;
+                    for (d, s) in dst.iter_mut().zip(self.plane(j)) {
+                        *d += w * s;
+                    }
+                }
+            });
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn planes_are_contiguous() {
+        let mut c = Cube::zeros(3, 2, 2);
+        c.plane_mut(1)[4] = 5.0;
+        assert_eq!(c.data[6 + 4], 5.0);
+        assert_eq!(c.spectrum(1, 1), vec![0.0, 5.0]);
+    }
+
+    #[test]
+    fn mix_is_matrix_product() {
+        let c = Cube::from_vec(1, 1, 2, vec![1.0, 2.0]).unwrap();
+        let m = c
+            .mix(&[vec![1.0, 1.0], vec![2.0, -1.0], vec![0.0, 3.0]])
+            .unwrap();
+        assert_eq!(m.data, vec![3.0, 0.0, 6.0]);
+    }
+}

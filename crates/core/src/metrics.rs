@@ -1,0 +1,304 @@
+//! Error against the truth: PSNR, SSIM, RMSE/NRMSE and the spectral angle (SAM).
+//! Conventions: the peak of PSNR and the dynamic range L of SSIM are the truth's maximum over the
+//! whole cube (one figure for all planes, as for data scaled to [0, 1]); per-plane figures are
+//! averaged over planes.
+
+use crate::error::Error;
+use crate::error::Result;
+use crate::Cube;
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Figures of one estimate against its truth.
+#[derive(Clone, Debug, Serialize)]
+pub struct Metrics {
+    /// Mean of the per-plane PSNR over planes with a non-zero error, in dB.
+    pub psnr_db: f64,
+    /// Per plane; +∞ (written as null in JSON) where the plane is exact.
+    pub psnr_per_plane: Vec<f64>,
+    /// Planes reproduced exactly (left out of the mean PSNR).
+    pub exact_planes: usize,
+    pub ssim: f64,
+    pub ssim_per_plane: Vec<f64>,
+    /// RMSE over all values, in the data's units.
+    pub rmse: f64,
+    /// RMSE divided by the peak.
+    pub nrmse: f64,
+    /// Mean spectral angle in degrees over pixels where both spectra are non-zero.
+    pub sam_deg: f64,
+    /// Pixels left out of SAM because a spectrum is zero.
+    pub sam_skipped: usize,
+    pub peak: f64,
+}
+
+/// Compare an estimate with the truth (same shape).
+pub fn compare(truth: &Cube, estimate: &Cube) -> Result<Metrics> {
+    truth.check_same_shape(estimate, "estimate against truth")?;
+    if !estimate.all_finite() || !truth.all_finite() {
+        return Err(Error::Numerical(
+            "NaN or infinite values in a compared cube".into(),
+        ));
+    }
+    let peak = truth.max() as f64;
+    if peak.is_nan() || peak <= 0.0 {
+        return Err(Error::Numerical(format!(
+            "the truth's peak is {peak}: PSNR and SSIM need a positive peak"
+        )));
+    }
+    let n = truth.pixels() as f64;
+    let mse: Vec<f64> = (0..truth.planes)
+        .into_par_iter()
+        .map(|k| {
+            let s: f64 = truth
+                .plane(k)
+                .iter()
+                .zip(estimate.plane(k))
+                .map(|(a, b)| (*a as f64 - *b as f64).powi(2))
+                .sum();
+            s / n
+        })
+        .collect();
+    let psnr_per_plane: Vec<f64> = mse
+        .iter()
+        .map(|&m| {
+            if m > 0.0 {
+                10.0 * (peak * peak / m).log10()
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect();
+    let finite: Vec<f64> = psnr_per_plane
+        .iter()
+        .cloned()
+        .filter(|v| v.is_finite())
+        .collect();
+    let exact_planes = psnr_per_plane.len() - finite.len();
+    let psnr_db = if finite.is_empty() {
+        f64::INFINITY
+    } else {
+        finite.iter().sum::<f64>() / finite.len() as f64
+    };
+    let ssim_per_plane: Vec<f64> = (0..truth.planes)
+        .into_par_iter()
+        .map(|k| {
+            ssim_plane(
+                truth.plane(k),
+                estimate.plane(k),
+                truth.width,
+                truth.height,
+                peak,
+            )
+        })
+        .collect();
+    let ssim = ssim_per_plane.iter().sum::<f64>() / ssim_per_plane.len() as f64;
+    let rmse = (mse.iter().sum::<f64>() / mse.len() as f64).sqrt();
+    let (sam_sum, sam_count) = sam(truth, estimate);
+    let sam_skipped = truth.pixels() - sam_count;
+    Ok(Metrics {
+        psnr_db,
+        psnr_per_plane,
+        exact_planes,
+        ssim,
+        ssim_per_plane,
+        rmse,
+        nrmse: rmse / peak,
+        sam_deg: if sam_count > 0 {
+            (sam_sum / sam_count as f64).to_degrees()
+        } else {
+            0.0
+        },
+        sam_skipped,
+        peak,
+    })
+}
+
+/// Sum of spectral angles (radians) and the number of pixels counted.
+fn sam(truth: &Cube, est: &Cube) -> (f64, usize) {
+    (0..truth.pixels())
+        .into_par_iter()
+        .with_min_len(4096)
+        .map(|p| {
+            let (mut d, mut a2, mut b2) = (0.0f64, 0.0f64, 0.0f64);
+            for k in 0..truth.planes {
+                let (a, b) = (truth.plane(k)[p] as f64, est.plane(k)[p] as f64);
+                d += a * b;
+                a2 += a * a;
+                b2 += b * b;
+            }
+            if a2 > 0.0 && b2 > 0.0 {
+                ((d / (a2 * b2).sqrt()).clamp(-1.0, 1.0).acos(), 1)
+            } else {
+                (0.0, 0)
+            }
+        })
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// The 11-tap Gaussian of σ = 1.5, normalised to sum 1.
+fn gaussian_taps() -> [f64; 11] {
+    let mut g = [0.0; 11];
+    for (i, v) in g.iter_mut().enumerate() {
+        let x = i as f64 - 5.0;
+        *v = (-x * x / (2.0 * 1.5 * 1.5)).exp();
+    }
+    let s: f64 = g.iter().sum();
+    g.map(|v| v / s)
+}
+
+/// 'Valid' separable filtering with the 11-tap window: output (w−10) × (h−10).
+fn filter_valid(img: &[f64], w: usize, h: usize, g: &[f64; 11]) -> Vec<f64> {
+    let (ow, oh) = (w - 10, h - 10);
+    let mut rows = vec![0.0; ow * h];
+    for y in 0..h {
+        for x in 0..ow {
+            rows[y * ow + x] = (0..11).map(|t| g[t] * img[y * w + x + t]).sum();
+        }
+    }
+    let mut out = vec![0.0; ow * oh];
+    for y in 0..oh {
+        for x in 0..ow {
+            out[y * ow + x] = (0..11).map(|t| g[t] * rows[(y + t) * ow + x]).sum();
+        }
+    }
+    out
+}
+
+/// Mean SSIM of one plane (Wang et al. 2004) over the valid region; a plane smaller than the
+/// window gives the single-window SSIM of the whole plane with uniform weights.
+pub fn ssim_plane(a: &[f32], b: &[f32], w: usize, h: usize, range: f64) -> f64 {
+    let (c1, c2) = ((0.01 * range).powi(2), (0.03 * range).powi(2));
+    let formula = |ma: f64, mb: f64, va: f64, vb: f64, cov: f64| {
+        ((2.0 * ma * mb + c1) * (2.0 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
+    };
+    let a: Vec<f64> = a.iter().map(|&v| v as f64).collect();
+    let b: Vec<f64> = b.iter().map(|&v| v as f64).collect();
+    if w < 11 || h < 11 {
+        let n = a.len() as f64;
+        let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+        let va = a.iter().map(|v| (v - ma).powi(2)).sum::<f64>() / n;
+        let vb = b.iter().map(|v| (v - mb).powi(2)).sum::<f64>() / n;
+        let cov = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - ma) * (y - mb))
+            .sum::<f64>()
+            / n;
+        return formula(ma, mb, va, vb, cov);
+    }
+    let g = gaussian_taps();
+    let prod = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| p * q).collect::<Vec<f64>>();
+    let ma = filter_valid(&a, w, h, &g);
+    let mb = filter_valid(&b, w, h, &g);
+    let saa = filter_valid(&prod(&a, &a), w, h, &g);
+    let sbb = filter_valid(&prod(&b, &b), w, h, &g);
+    let sab = filter_valid(&prod(&a, &b), w, h, &g);
+    let n = ma.len();
+    (0..n)
+        .map(|i| {
+            let (m1, m2) = (ma[i], mb[i]);
+            formula(m1, m2, saa[i] - m1 * m1, sbb[i] - m2 * m2, sab[i] - m1 * m2)
+        })
+        .sum::<f64>()
+        / n as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn cube(w: usize, h: usize, planes: usize, f: impl Fn(usize) -> f32) -> Cube {
+        Cube::from_vec(w, h, planes, (0..w * h * planes).map(f).collect()).unwrap()
+    }
+
+    #[test]
+    fn psnr_and_nrmse_of_a_constant_error() {
+        // Peak 1, error 0.1 everywhere: MSE 0.01, PSNR = 10·log10(1/0.01) = 20 dB, NRMSE 0.1.
+        let t = cube(16, 16, 2, |i| if i == 0 { 1.0 } else { 0.5 });
+        let e = cube(16, 16, 2, |i| if i == 0 { 1.1 } else { 0.6 });
+        let m = compare(&t, &e).unwrap();
+        assert!((m.psnr_db - 20.0).abs() < 1e-5, "{}", m.psnr_db);
+        assert!((m.nrmse - 0.1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn ssim_of_constants_by_hand() {
+        // Two constant images a and b: σ = 0, SSIM = (2ab + C1)/(a² + b² + C1).
+        let (a, b, l) = (0.5f32, 0.25f32, 1.0f64);
+        let s = ssim_plane(&[a; 400], &[b; 400], 20, 20, l);
+        let c1 = (0.01 * l).powi(2);
+        let want = (2.0 * 0.5 * 0.25 + c1) / (0.25 + 0.0625 + c1);
+        assert!((s - want).abs() < 1e-12, "{s} vs {want}");
+        assert!((ssim_plane(&[a; 400], &[a; 400], 20, 20, l) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ssim_of_a_contrast_change_by_hand() {
+        // A zero-mean ±1 checkerboard against a version scaled by k: in every window the Gaussian
+        // means are equal for both (μ_b = k·μ_a), σ_b² = k²σ_a², σ_ab = kσ_a², so with μ ≈ 0 the
+        // SSIM is (C1)(2kσ² + C2)/((C1)(σ²(1+k²) + C2)) = (2kσ² + C2)/((1 + k²)σ² + C2), σ² ≈ 1.
+        let (w, h, k) = (41usize, 41usize, 0.5f32);
+        let a: Vec<f32> = (0..w * h)
+            .map(|i| if (i % w + i / w) % 2 == 0 { 1.0 } else { -1.0 })
+            .collect();
+        let b: Vec<f32> = a.iter().map(|v| v * k).collect();
+        let s = ssim_plane(&a, &b, w, h, 2.0);
+        let c2 = (0.03f64 * 2.0).powi(2);
+        let g = gaussian_taps();
+        // Exact local moments of the checkerboard under the Gaussian window.
+        let alt: f64 = (0..11)
+            .map(|i| g[i] * if i % 2 == 0 { 1.0 } else { -1.0 })
+            .sum();
+        let mu2 = alt * alt * alt * alt; // μ_a² = (Σ±g)⁴ for the separable window
+        let var = 1.0 - mu2;
+        let c1 = (0.01f64 * 2.0).powi(2);
+        let kk = k as f64;
+        let want = ((2.0 * kk * mu2 + c1) * (2.0 * kk * var + c2))
+            / (((1.0 + kk * kk) * mu2 + c1) * ((1.0 + kk * kk) * var + c2));
+        assert!((s - want).abs() < 1e-9, "{s} vs {want}");
+    }
+
+    #[test]
+    fn sam_of_orthogonal_and_scaled_spectra() {
+        let t = Cube::from_vec(2, 1, 2, vec![1.0, 3.0, 0.0, 1.0]).unwrap();
+        let e = Cube::from_vec(2, 1, 2, vec![0.0, 6.0, 2.0, 2.0]).unwrap();
+        // Pixel 0: (1,0) vs (0,2) → 90°; pixel 1: (3,1) vs (6,2) → 0°.
+        let m = compare(&t, &e).unwrap();
+        assert!((m.sam_deg - 45.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let t = cube(4, 4, 1, |_| 0.0);
+        assert!(compare(&t, &t).is_err());
+        let t = cube(4, 4, 1, |i| i as f32);
+        let e = cube(4, 4, 1, |i| if i == 3 { f32::NAN } else { 0.0 });
+        assert!(compare(&t, &e).is_err());
+        assert!(compare(&t, &cube(4, 2, 1, |_| 0.0)).is_err());
+        let m = compare(&t, &t).unwrap();
+        assert_eq!(m.exact_planes, 1);
+        assert!(m.psnr_db.is_infinite() && m.ssim == 1.0);
+    }
+
+    proptest! {
+        #[test]
+        fn ssim_is_symmetric_and_at_most_one(seed in 0u64..1000, amp in 0.0f32..0.5) {
+            let a: Vec<f32> = (0..24 * 24).map(|i| (((i as u64 * 2654435761 + seed) % 97) as f32) / 97.0).collect();
+            let b: Vec<f32> = a.iter().enumerate().map(|(i, v)| v + amp * (((i * 31) % 7) as f32 / 7.0 - 0.5)).collect();
+            let s1 = ssim_plane(&a, &b, 24, 24, 1.0);
+            let s2 = ssim_plane(&b, &a, 24, 24, 1.0);
+            prop_assert!((s1 - s2).abs() < 1e-12);
+            prop_assert!(s1 <= 1.0 + 1e-12);
+        }
+
+        #[test]
+        fn psnr_falls_as_noise_grows(k in 1.1f32..4.0) {
+            let t = cube(16, 16, 1, |i| (i % 13) as f32 / 13.0 + 0.1);
+            let noise = |s: f32| cube(16, 16, 1, |i| (i % 13) as f32 / 13.0 + 0.1 + s * (((i * 7) % 5) as f32 - 2.0) / 10.0);
+            let p1 = compare(&t, &noise(0.1)).unwrap().psnr_db;
+            let p2 = compare(&t, &noise(0.1 * k)).unwrap().psnr_db;
+            prop_assert!(p2 < p1);
+        }
+    }
+}

@@ -1,0 +1,891 @@
+//! Per-pixel spectral unmixing (the paper's eq. "quadraticProgramming"):
+//! `argmin_α ‖x̂ − Fα‖² + η‖D₂Bα‖²  s.t. Bα ≥ 0`, with F the channel response to each basis
+//! vector, B the spectral basis (bands × J) and D₂ the second difference across bands.
+//!
+//! The Hessian H = FᵀF + η BᵀD₂ᵀD₂B is the same for every pixel, so it is factored once per rig:
+//! the unconstrained cube is a fixed linear map r = P x̂ (P = B H⁻¹Fᵀ), and only the pixels where
+//! that map gives a negative band go through an exact active-set method (Goldfarb–Idnani's dual
+//! method, `dual.rs`, which starts from that unconstrained solution). D₂ is taken in band-index
+//! units, so η carries the grid spacing (η_nm = η · Δλ⁴).
+
+// `!(x > y)` is deliberate: it is true for NaN too. The small dense kernels index by position.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
+use crate::error::Error;
+use crate::error::Result;
+use crate::Cube;
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+use serde::Serialize;
+
+mod dual;
+
+/// Largest number of basis vectors J (stack arrays in the per-pixel solver).
+pub const MAX_BASIS: usize = 8;
+/// Largest number of bands (constraints) in the per-pixel solver.
+pub const MAX_BANDS: usize = 64;
+/// Largest number of channels x̂ per pixel.
+pub const MAX_CHANNELS: usize = 16;
+/// Largest condition number of H accepted by [`Unmixer::new`].
+pub const MAX_CONDITION: f64 = 1e12;
+/// Active-set iterations allowed per pixel before [`Unmixer::solve_pixel`] gives up.
+pub const MAX_ITERATIONS: usize = 500;
+/// Rows of the image handled by one rayon task in [`Unmixer::unmix`].
+const ROWS_PER_CHUNK: usize = 8;
+
+/// The unmixing problem of one rig, factored once and shared by all pixels.
+#[derive(Clone, Debug)]
+pub struct Unmixer {
+    /// Basis vectors J.
+    n: usize,
+    /// Bands (constraints).
+    m: usize,
+    /// Channels.
+    c: usize,
+    /// H, row-major n × n (for objective values).
+    h: Vec<f64>,
+    /// M = H⁻¹Fᵀ, row-major n × c: α_unc = M x̂.
+    mx: Vec<f64>,
+    /// diag(gain)·P, P = B M, row-major m × c, in f32 for the batched fast path.
+    p32: Vec<f32>,
+    /// Per-band output gains (all 1 unless set by [`Unmixer::with_output_gains`]).
+    gain: Vec<f64>,
+    /// B by columns: `bt[j][k]` = basis vector j at band k (the spectrum Bα as a sum of
+    /// scaled columns, which vectorises over the bands).
+    bt: Vec<[f64; MAX_BANDS]>,
+    /// 1/‖b_k‖ for each row of B (normalises the violation of band k; 0 for a zero row,
+    /// which no α can violate).
+    b_inv_norm: Vec<f64>,
+    /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the dual active set's starting factor.
+    linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
+    condition: f64,
+}
+
+/// How one pixel was solved.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolveInfo {
+    /// Active-set iterations (0: the unconstrained solution was feasible).
+    pub iterations: usize,
+    /// Number of bands held at zero in the final working set.
+    pub active: usize,
+    bands: [usize; MAX_BASIS],
+    multipliers: [f64; MAX_BASIS],
+}
+
+impl SolveInfo {
+    /// The bands of the final working set (where B α = 0 is enforced).
+    pub fn active_bands(&self) -> &[usize] {
+        &self.bands[..self.active]
+    }
+
+    /// Lagrange multipliers μ ≥ 0 of the working set, in the objective ½αᵀHα − (Fᵀx̂)ᵀα:
+    /// Hα − Fᵀx̂ = Σ_k μ_k b_{band_k}ᵀ.
+    pub fn multipliers(&self) -> &[f64] {
+        &self.multipliers[..self.active]
+    }
+}
+
+/// Counts over one unmixed cube.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct UnmixStats {
+    pub pixels: usize,
+    /// Pixels whose unconstrained spectrum went negative somewhere and were solved exactly.
+    pub constrained_pixels: usize,
+    /// Of those, pixels where the non-negativity bound is active at the solution.
+    pub bound_pixels: usize,
+    pub max_iterations: usize,
+    pub total_iterations: usize,
+}
+
+/// The second-difference matrix ((bands − 2) × bands), rows [1, −2, 1]; empty below 3 bands.
+pub fn second_difference(bands: usize) -> DMatrix<f64> {
+    let rows = bands.saturating_sub(2);
+    DMatrix::from_fn(rows, bands, |i, j| match j.wrapping_sub(i) {
+        0 | 2 => 1.0,
+        1 => -2.0,
+        _ => 0.0,
+    })
+}
+
+impl Unmixer {
+    /// Factor the problem for channel matrix `f` (channels × J) and basis `b` (bands × J).
+    pub fn new(f: &DMatrix<f64>, b: &DMatrix<f64>, eta: f64) -> Result<Unmixer> {
+        if !eta.is_finite() || eta < 0.0 {
+            return Err(Error::Numerical(format!(
+                "unmixing weight η = {eta}: must be finite and ≥ 0"
+            )));
+        }
+        let (c, n, m) = (f.nrows(), f.ncols(), b.nrows());
+        if b.ncols() != n {
+            return Err(Error::Shape(format!(
+                "channel matrix F has {n} basis columns, basis B has {}",
+                b.ncols()
+            )));
+        }
+        if !(1..=MAX_BASIS).contains(&n)
+            || !(1..=MAX_BANDS).contains(&m)
+            || !(1..=MAX_CHANNELS).contains(&c)
+        {
+            return Err(Error::Shape(format!(
+                "unmixing needs 1..={MAX_BASIS} basis vectors, 1..={MAX_BANDS} bands and \
+                 1..={MAX_CHANNELS} channels; got {n}, {m} and {c}"
+            )));
+        }
+        if f.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+            return Err(Error::Numerical("F or B holds a non-finite value".into()));
+        }
+        let d2b = second_difference(m) * b;
+        let h = f.transpose() * f + eta * d2b.transpose() * &d2b;
+        let eig = nalgebra::SymmetricEigen::new(h.clone());
+        let (lo, hi) = (eig.eigenvalues.min(), eig.eigenvalues.max());
+        let condition = if lo > 0.0 { hi / lo } else { f64::INFINITY };
+        if !(condition <= MAX_CONDITION) {
+            return Err(Error::Numerical(format!(
+                "unmixing Hessian FᵀF + η BᵀD₂ᵀD₂B (η = {eta}) is singular or ill-conditioned: \
+                 condition number {condition:.3e} > {MAX_CONDITION:e}, eigenvalues {lo:.3e}..{hi:.3e}; \
+                 use more independent filters or a larger η"
+            )));
+        }
+        let chol = nalgebra::Cholesky::new(h.clone())
+            .ok_or_else(|| Error::Numerical("unmixing Hessian is not positive definite".into()))?;
+        let mmat = chol.solve(&f.transpose()); // n × c
+        let linv = chol
+            .l()
+            .solve_lower_triangular(&DMatrix::identity(n, n))
+            .ok_or_else(|| Error::Numerical("unmixing Hessian factor is singular".into()))?;
+        // Column `col` of L⁻ᵀ is row `col` of L⁻¹.
+        let mut linv_t = [[0.0; MAX_BASIS]; MAX_BASIS];
+        for (col, column) in linv_t[..n].iter_mut().enumerate() {
+            for (row, v) in column[..n].iter_mut().enumerate() {
+                *v = linv[(col, row)];
+            }
+        }
+        let p = b * &mmat; // m × c
+        let row_major = |a: &DMatrix<f64>| -> Vec<f64> {
+            (0..a.nrows())
+                .flat_map(|i| (0..a.ncols()).map(move |j| a[(i, j)]))
+                .collect()
+        };
+        Ok(Unmixer {
+            n,
+            m,
+            c,
+            h: row_major(&h),
+            mx: row_major(&mmat),
+            p32: row_major(&p).iter().map(|&v| v as f32).collect(),
+            gain: vec![1.0; m],
+            bt: b
+                .column_iter()
+                .map(|col| std::array::from_fn(|k| if k < m { col[k] } else { 0.0 }))
+                .collect(),
+            b_inv_norm: b
+                .row_iter()
+                .map(|row| {
+                    if row.norm() > 0.0 {
+                        1.0 / row.norm()
+                    } else {
+                        0.0
+                    }
+                })
+                .collect(),
+            linv_t,
+            condition,
+        })
+    }
+
+    pub fn channels(&self) -> usize {
+        self.c
+    }
+
+    pub fn bands(&self) -> usize {
+        self.m
+    }
+
+    pub fn basis_len(&self) -> usize {
+        self.n
+    }
+
+    /// Condition number of H.
+    pub fn condition(&self) -> f64 {
+        self.condition
+    }
+
+    /// Write diag(gains)·Bα instead of Bα (the light of a radiance scene, `Rig::light_gains`),
+    /// in the same pass. The gains must be finite and > 0, so the constraint Bα ≥ 0 is unchanged.
+    pub fn with_output_gains(mut self, gains: &[f64]) -> Result<Unmixer> {
+        if gains.len() != self.m {
+            return Err(Error::Shape(format!(
+                "{} output gains for {} bands",
+                gains.len(),
+                self.m
+            )));
+        }
+        if let Some((k, g)) = gains
+            .iter()
+            .enumerate()
+            .find(|(_, g)| !(g.is_finite() && **g > 0.0))
+        {
+            return Err(Error::Numerical(format!(
+                "output gain of band {k} is {g}; it must be finite and > 0"
+            )));
+        }
+        for ((row, &g), &g0) in self.p32.chunks_exact_mut(self.c).zip(gains).zip(&self.gain) {
+            row.iter_mut()
+                .for_each(|v| *v = (*v as f64 / g0 * g) as f32);
+        }
+        self.gain = gains.to_vec();
+        Ok(self)
+    }
+
+    /// The objective ½αᵀHα − (Fᵀx̂)ᵀα, written with M: Fᵀx̂ = H M x̂. It equals half of
+    /// ‖x̂ − Fα‖² + η‖D₂Bα‖² − ‖x̂‖².
+    pub fn objective(&self, xhat: &[f64], alpha: &[f64]) -> f64 {
+        let n = self.n;
+        let au = self.unconstrained_alpha(xhat);
+        let mut obj = 0.0;
+        for i in 0..n {
+            let hrow = &self.h[i * n..(i + 1) * n];
+            let ha: f64 = hrow.iter().zip(alpha).map(|(h, a)| h * a).sum();
+            let hu: f64 = hrow.iter().zip(&au[..n]).map(|(h, a)| h * a).sum();
+            obj += alpha[i] * (0.5 * ha - hu);
+        }
+        obj
+    }
+
+    fn unconstrained_alpha(&self, xhat: &[f64]) -> [f64; MAX_BASIS] {
+        let mut a = [0.0; MAX_BASIS];
+        for (i, ai) in a[..self.n].iter_mut().enumerate() {
+            *ai = self.mx[i * self.c..(i + 1) * self.c]
+                .iter()
+                .zip(xhat)
+                .map(|(m, x)| m * x)
+                .sum();
+        }
+        a
+    }
+
+    /// r = Bα on the bands.
+    fn spectrum(&self, alpha: &[f64], r: &mut [f64; MAX_BANDS]) {
+        r.fill(0.0);
+        for (col, &a) in self.bt.iter().zip(alpha) {
+            for (rk, bk) in r[..self.m].iter_mut().zip(col) {
+                *rk += bk * a;
+            }
+        }
+    }
+
+    /// The exact solution α for one pixel's channel values `xhat` (length = channels), written to
+    /// `out_alpha` (length = J).
+    pub fn solve_pixel(&self, xhat: &[f64], out_alpha: &mut [f64]) -> Result<SolveInfo> {
+        if xhat.len() != self.c || out_alpha.len() != self.n {
+            return Err(Error::Shape(format!(
+                "solve_pixel: {} channel values and {} coefficients for a {}-channel, J = {} unmixer",
+                xhat.len(),
+                out_alpha.len(),
+                self.c,
+                self.n
+            )));
+        }
+        if let Some(k) = xhat.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "channel {k} value is {}",
+                xhat[k]
+            )));
+        }
+        let mut r = [0.0; MAX_BANDS];
+        self.solve(xhat, out_alpha, &mut r)
+    }
+
+    /// [`Unmixer::solve_pixel`] on checked input, also writing the band values r = Bα.
+    fn solve(
+        &self,
+        xhat: &[f64],
+        out_alpha: &mut [f64],
+        r: &mut [f64; MAX_BANDS],
+    ) -> Result<SolveInfo> {
+        let au = self.unconstrained_alpha(xhat);
+        self.spectrum(&au[..self.n], r);
+        let mut info = SolveInfo {
+            iterations: 0,
+            active: 0,
+            bands: [0; MAX_BASIS],
+            multipliers: [0.0; MAX_BASIS],
+        };
+        if r[..self.m].iter().all(|&v| v >= 0.0) {
+            out_alpha.copy_from_slice(&au[..self.n]);
+            return Ok(info);
+        }
+        self.dual_active_set(&au, r, out_alpha, &mut info)?;
+        Ok(info)
+    }
+
+    /// Accept the active set's result: α finite and every band r = Bα ≥ −1e-9·scale.
+    fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
+        let worst = r[..self.m].iter().cloned().fold(0.0f64, f64::min);
+        if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Unmix a cube of channel planes x̂ into a cube of band planes r = Bα, α from the QP.
+    /// Bands of solved pixels are B α with the round-off left by the solver (≤ 1e-9 of the
+    /// pixel's scale, checked) set to zero, so every output value is ≥ 0.
+    pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
+        let mut out = Cube::zeros(xhat.width, xhat.height, self.m);
+        let stats = self.unmix_into(xhat, &mut out)?;
+        Ok((out, stats))
+    }
+
+    /// [`Unmixer::unmix`] into a cube of the right size that the caller keeps from frame to
+    /// frame: a real-time loop then pays for its 31 output planes' memory once.
+    pub fn unmix_into(&self, xhat: &Cube, out: &mut Cube) -> Result<UnmixStats> {
+        if xhat.planes != self.c {
+            return Err(Error::Shape(format!(
+                "unmixing expects {} channel planes, the cube has {}",
+                self.c, xhat.planes
+            )));
+        }
+        if (out.width, out.height, out.planes) != (xhat.width, xhat.height, self.m) {
+            return Err(Error::Shape(format!(
+                "unmixing output {}×{}×{} for channels {}×{} and {} bands",
+                out.width, out.height, out.planes, xhat.width, xhat.height, self.m
+            )));
+        }
+        let (wid, npx) = (xhat.width, xhat.pixels());
+        if npx == 0 {
+            return Ok(UnmixStats::default());
+        }
+        let chunk_px = ROWS_PER_CHUNK * wid;
+        let nchunks = npx.div_ceil(chunk_px);
+        let mut views: Vec<Vec<&mut [f32]>> =
+            (0..nchunks).map(|_| Vec::with_capacity(self.m)).collect();
+        for plane in out.data.chunks_exact_mut(npx) {
+            for (k, part) in plane.chunks_mut(chunk_px).enumerate() {
+                views[k].push(part);
+            }
+        }
+        views
+            .into_par_iter()
+            .enumerate()
+            .map_init(
+                || vec![0.0f32; chunk_px],
+                |minr, (k, mut bands)| {
+                    let start = k * chunk_px;
+                    let len = bands[0].len();
+                    let xs: [&[f32]; MAX_CHANNELS] = std::array::from_fn(|j| {
+                        if j < self.c {
+                            &xhat.plane(j)[start..start + len]
+                        } else {
+                            &[]
+                        }
+                    });
+                    self.unmix_chunk(&xs[..self.c], &mut bands, &mut minr[..len])
+                        .map_err(|(i, msg)| {
+                            let p = start + i;
+                            Error::Numerical(format!(
+                                "unmixing pixel ({}, {}): {msg}",
+                                p % wid,
+                                p / wid
+                            ))
+                        })
+                },
+            )
+            .try_reduce(UnmixStats::default, |a, b| {
+                Ok(UnmixStats {
+                    pixels: a.pixels + b.pixels,
+                    constrained_pixels: a.constrained_pixels + b.constrained_pixels,
+                    bound_pixels: a.bound_pixels + b.bound_pixels,
+                    max_iterations: a.max_iterations.max(b.max_iterations),
+                    total_iterations: a.total_iterations + b.total_iterations,
+                })
+            })
+    }
+
+    /// One chunk: r = P x̂ band by band (plane-major, vectorisable), then the exact solver on the
+    /// pixels with a negative band. `minr` is scratch of the chunk's length. An error carries
+    /// the pixel's offset in the chunk.
+    fn unmix_chunk(
+        &self,
+        xs: &[&[f32]],
+        bands: &mut [&mut [f32]],
+        minr: &mut [f32],
+    ) -> std::result::Result<UnmixStats, (usize, String)> {
+        let c = self.c;
+        for (j, x) in xs.iter().enumerate() {
+            if !all_finite(x) {
+                let i = x.iter().position(|v| !v.is_finite()).unwrap_or(0);
+                return Err((i, format!("channel {j} is {}", x[i])));
+            }
+        }
+        // Each band in blocks of BLOCK pixels accumulated in a local buffer: one store per
+        // value, the channel planes read from cache.
+        const BLOCK: usize = 64;
+        minr.fill(f32::INFINITY);
+        for (bnd, out) in bands.iter_mut().enumerate() {
+            let p = &self.p32[bnd * c..(bnd + 1) * c];
+            for start in (0..out.len()).step_by(BLOCK) {
+                let end = (start + BLOCK).min(out.len());
+                let mut acc = [0.0f32; BLOCK];
+                let acc = &mut acc[..end - start];
+                for (a, &x) in acc.iter_mut().zip(&xs[0][start..end]) {
+                    *a = p[0] * x;
+                }
+                for (&pj, x) in p[1..].iter().zip(&xs[1..]) {
+                    for (a, &x) in acc.iter_mut().zip(&x[start..end]) {
+                        *a += pj * x;
+                    }
+                }
+                out[start..end].copy_from_slice(acc);
+                for (mn, &a) in minr[start..end].iter_mut().zip(acc.iter()) {
+                    *mn = mn.min(a);
+                }
+            }
+        }
+        let mut stats = UnmixStats {
+            pixels: minr.len(),
+            ..UnmixStats::default()
+        };
+        let mut xp = [0.0f64; MAX_CHANNELS];
+        let mut alpha = [0.0f64; MAX_BASIS];
+        let mut r = [0.0f64; MAX_BANDS];
+        for i in 0..minr.len() {
+            if minr[i] >= 0.0 {
+                continue;
+            }
+            for (xv, x) in xp.iter_mut().zip(xs) {
+                *xv = x[i] as f64;
+            }
+            let info = self
+                .solve(&xp[..c], &mut alpha[..self.n], &mut r)
+                .map_err(|e| (i, e.to_string()))?;
+            for ((out, &v), g) in bands.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
+                out[i] = (v.max(0.0) * g) as f32;
+            }
+            stats.constrained_pixels += 1;
+            stats.bound_pixels += (info.active > 0) as usize;
+            stats.max_iterations = stats.max_iterations.max(info.iterations);
+            stats.total_iterations += info.iterations;
+        }
+        Ok(stats)
+    }
+}
+
+/// True when every value is finite, by a lane-wise sum of `v − v` (0 for finite values, NaN
+/// otherwise) that the compiler can vectorise.
+#[allow(clippy::eq_op)]
+fn all_finite(x: &[f32]) -> bool {
+    let mut lanes = [0.0f32; 8];
+    let chunks = x.chunks_exact(8);
+    let rest = chunks.remainder();
+    for ch in chunks {
+        for (l, &v) in lanes.iter_mut().zip(ch) {
+            *l += v - v;
+        }
+    }
+    lanes.iter().all(|&l| l == 0.0) && rest.iter().all(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clarabel::algebra::CscMatrix;
+    use clarabel::solver::{
+        DefaultSettingsBuilder, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus,
+    };
+    use nalgebra::DVector;
+    use proptest::prelude::*;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, StandardNormal};
+    use rand_pcg::Pcg64;
+
+    const BANDS: usize = 31;
+    const J: usize = 6;
+
+    /// Random smooth positive spectra (sums of Gaussians on a floor), bands × count.
+    fn smooth_spectra(rng: &mut Pcg64, count: usize) -> DMatrix<f64> {
+        let mut s = DMatrix::zeros(BANDS, count);
+        for c in 0..count {
+            let floor: f64 = rng.gen_range(0.02..0.2);
+            let bumps: Vec<(f64, f64, f64)> = (0..3)
+                .map(|_| {
+                    (
+                        rng.gen_range(0.0..0.6),
+                        rng.gen_range(0.0..31.0),
+                        rng.gen_range(3.0..10.0),
+                    )
+                })
+                .collect();
+            for b in 0..BANDS {
+                s[(b, c)] = floor
+                    + bumps
+                        .iter()
+                        .map(|(a, mu, w)| a * (-((b as f64 - mu) / w).powi(2)).exp())
+                        .sum::<f64>();
+            }
+        }
+        s
+    }
+
+    /// Uncentred PCA basis (BANDS × J) of random smooth spectra.
+    fn basis(rng: &mut Pcg64) -> DMatrix<f64> {
+        let s = smooth_spectra(rng, 200);
+        let eig = nalgebra::SymmetricEigen::new(&s * s.transpose());
+        let mut order: Vec<usize> = (0..BANDS).collect();
+        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+        DMatrix::from_fn(BANDS, J, |b, j| eig.eigenvectors[(b, order[j])])
+    }
+
+    /// Channel matrix F = T B for six smooth broad filters T (channels × bands).
+    fn filters(rng: &mut Pcg64, b: &DMatrix<f64>) -> DMatrix<f64> {
+        let t = smooth_spectra(rng, 6).transpose();
+        &t * b
+    }
+
+    /// The problem in the reference form: H and g = Fᵀx̂, built from F, B, η directly.
+    fn hessian(f: &DMatrix<f64>, b: &DMatrix<f64>, eta: f64) -> DMatrix<f64> {
+        let d = second_difference(b.nrows()) * b;
+        f.transpose() * f + eta * d.transpose() * d
+    }
+
+    fn objective(h: &DMatrix<f64>, g: &DVector<f64>, a: &DVector<f64>) -> f64 {
+        0.5 * a.dot(&(h * a)) - g.dot(a)
+    }
+
+    fn dense_csc(a: &DMatrix<f64>, upper_only: bool) -> CscMatrix<f64> {
+        let (mut colptr, mut rowval, mut nzval) = (vec![0], vec![], vec![]);
+        for j in 0..a.ncols() {
+            for i in 0..a.nrows() {
+                if (!upper_only || i <= j) && a[(i, j)] != 0.0 {
+                    rowval.push(i);
+                    nzval.push(a[(i, j)]);
+                }
+            }
+            colptr.push(rowval.len());
+        }
+        CscMatrix::new(a.nrows(), a.ncols(), colptr, rowval, nzval)
+    }
+
+    /// Clarabel on min ½αᵀHα − gᵀα s.t. −Bα + s = 0, s ≥ 0.
+    fn clarabel(h: &DMatrix<f64>, g: &DVector<f64>, b: &DMatrix<f64>) -> DVector<f64> {
+        let p = dense_csc(h, true);
+        let a = dense_csc(&(-b), false);
+        let q: Vec<f64> = g.iter().map(|v| -v).collect();
+        let rhs = vec![0.0; b.nrows()];
+        let settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .tol_gap_abs(1e-11)
+            .tol_gap_rel(1e-11)
+            .tol_feas(1e-11)
+            .max_iter(400)
+            .build()
+            .unwrap();
+        let mut solver =
+            DefaultSolver::new(&p, &q, &a, &rhs, &[NonnegativeConeT(b.nrows())], settings);
+        solver.solve();
+        assert!(
+            matches!(
+                solver.solution.status,
+                SolverStatus::Solved | SolverStatus::AlmostSolved
+            ),
+            "clarabel: {:?}",
+            solver.solution.status
+        );
+        DVector::from_vec(solver.solution.x.clone())
+    }
+
+    /// KKT conditions of our solution, from the reported working set and multipliers.
+    fn assert_kkt(
+        h: &DMatrix<f64>,
+        g: &DVector<f64>,
+        b: &DMatrix<f64>,
+        a: &DVector<f64>,
+        info: &SolveInfo,
+    ) {
+        let r = b * a;
+        let scale = (b * h.clone().cholesky().unwrap().solve(g))
+            .amax()
+            .max(1e-300);
+        assert!(r.min() >= -1e-9 * scale, "primal infeasible: {}", r.min());
+        let mut grad = h * a - g;
+        let mmax = info
+            .multipliers()
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        for (&k, &mu) in info.active_bands().iter().zip(info.multipliers()) {
+            assert!(mu >= -1e-12 * mmax, "negative multiplier {mu} on band {k}");
+            assert!(
+                (mu * r[k]).abs() <= 1e-9 * mmax * scale,
+                "complementarity {mu} · {}",
+                r[k]
+            );
+            grad -= b.row(k).transpose() * mu;
+        }
+        let gscale = g.amax().max((h * a).amax());
+        assert!(
+            grad.amax() <= 1e-9 * gscale,
+            "stationarity residual {:e}",
+            grad.amax()
+        );
+    }
+
+    /// Solve with the unmixer and Clarabel and check objective, solution and KKT.
+    fn check_against_clarabel(
+        f: &DMatrix<f64>,
+        b: &DMatrix<f64>,
+        eta: f64,
+        x: &[f64],
+        alpha_tol: f64,
+    ) -> SolveInfo {
+        let u = Unmixer::new(f, b, eta).unwrap();
+        let mut a = vec![0.0; b.ncols()];
+        let info = u.solve_pixel(x, &mut a).unwrap();
+        let a = DVector::from_vec(a);
+        let h = hessian(f, b, eta);
+        let g = f.transpose() * DVector::from_column_slice(x);
+        let ac = clarabel(&h, &g, b);
+        let (fo, fc) = (objective(&h, &g, &a), objective(&h, &g, &ac));
+        // Scale of the objective: its value at the unconstrained minimum, ½ gᵀH⁻¹g.
+        let fscale = 0.5 * g.dot(&h.clone().cholesky().unwrap().solve(&g));
+        assert!(
+            (fo - fc).abs() <= 1e-7 * fscale.max(fo.abs()),
+            "objective {fo} vs clarabel {fc}"
+        );
+        // Relative to the larger solution; at the vertex α = 0 (J bands pinned) a relative test is
+        // undefined and the unconstrained solution sets the scale.
+        let da = (&a - &ac).norm();
+        let ascale = if info.active == a.len() {
+            h.clone().cholesky().unwrap().solve(&g).norm()
+        } else {
+            a.norm().max(ac.norm())
+        };
+        assert!(
+            da <= alpha_tol * ascale,
+            "α {a} vs clarabel {ac}: {:e} relative",
+            da / ascale
+        );
+        assert_kkt(&h, &g, b, &a, &info);
+        assert!((u.objective(x, a.as_slice()) - fo).abs() <= 1e-9 * fscale.max(fo.abs()));
+        info
+    }
+
+    fn normal(rng: &mut Pcg64) -> f64 {
+        StandardNormal.sample(rng)
+    }
+
+    #[test]
+    fn unconstrained_solution_is_the_normal_equations() {
+        let mut rng = Pcg64::seed_from_u64(1);
+        let b = basis(&mut rng);
+        let f = filters(&mut rng, &b);
+        let eta = 0.5;
+        let u = Unmixer::new(&f, &b, eta).unwrap();
+        // A positive spectrum in the basis span with a strong floor: unconstrained optimum feasible.
+        let alpha_true = b.transpose() * DVector::from_element(BANDS, 1.0);
+        let x = &f * &alpha_true;
+        let mut a = vec![0.0; J];
+        let info = u.solve_pixel(x.as_slice(), &mut a).unwrap();
+        assert_eq!(info.iterations, 0);
+        let h = hessian(&f, &b, eta);
+        let want = h.lu().solve(&(f.transpose() * &x)).unwrap();
+        let err = (DVector::from_vec(a) - &want).amax();
+        assert!(err <= 1e-10 * want.amax(), "{err:e}");
+    }
+
+    #[test]
+    fn hand_solved_two_variable_qp() {
+        // F = [[2,0],[1,1]], B = I, η = 0, x̂ = (−2, 1): H = [[5,1],[1,1]], g = (−3, 1),
+        // unconstrained α = (−1, 2); with α₁ = 0 the minimum of ½α₂² − α₂ is α₂ = 1, and
+        // Hα − g = (4, 0) = 4·e₁ gives the multiplier 4 ≥ 0.
+        let f = DMatrix::from_row_slice(2, 2, &[2.0, 0.0, 1.0, 1.0]);
+        let b = DMatrix::identity(2, 2);
+        let u = Unmixer::new(&f, &b, 0.0).unwrap();
+        let mut a = [0.0; 2];
+        let info = u.solve_pixel(&[-2.0, 1.0], &mut a).unwrap();
+        assert!(
+            (a[0] - 0.0).abs() < 1e-15 && (a[1] - 1.0).abs() < 1e-14,
+            "{a:?}"
+        );
+        assert_eq!(info.active_bands(), &[0]);
+        assert!(
+            (info.multipliers()[0] - 4.0).abs() < 1e-13,
+            "{:?}",
+            info.multipliers()
+        );
+        assert!((u.objective(&[-2.0, 1.0], &a) - -0.5).abs() < 1e-14);
+    }
+
+    #[test]
+    fn matches_clarabel_on_random_problems() {
+        let mut rng = Pcg64::seed_from_u64(2);
+        let mut bound = 0;
+        for trial in 0..240 {
+            if trial % 20 == 0 {
+                rng = Pcg64::seed_from_u64(1000 + trial);
+            }
+            let b = basis(&mut rng);
+            let f = filters(&mut rng, &b);
+            let eta = [0.0, 0.01, 0.3, 5.0][trial as usize % 4];
+            // A spectrum in the span plus noise large enough to push bands negative.
+            let s = smooth_spectra(&mut rng, 1);
+            let x: Vec<f64> = (&f * (b.transpose() * s.column(0)))
+                .iter()
+                .map(|v| v + 0.3 * normal(&mut rng) * v.abs().max(0.1))
+                .collect();
+            let info = check_against_clarabel(&f, &b, eta, &x, 1e-5);
+            bound += (info.active > 0) as usize;
+        }
+        assert!(
+            bound >= 40,
+            "only {bound} problems had a binding constraint"
+        );
+    }
+
+    #[test]
+    fn matches_clarabel_on_ill_conditioned_problems() {
+        let mut rng = Pcg64::seed_from_u64(3);
+        let b = basis(&mut rng);
+        let f0 = filters(&mut rng, &b);
+        // Nearly collinear F columns, small η.
+        let mut f1 = f0.clone();
+        let c0 = f1.column(0).clone_owned();
+        for i in 0..6 {
+            f1[(i, 1)] = c0[i] * 0.9 + 1e-3 * normal(&mut rng);
+        }
+        let u1 = Unmixer::new(&f1, &b, 1e-4).unwrap();
+        assert!(
+            u1.condition() > 1e6,
+            "not ill-conditioned: {:e}",
+            u1.condition()
+        );
+        let mut cases = 0;
+        for (f, eta) in [(&f1, 1e-4), (&f0, 0.0), (&f0, 1e4)] {
+            for _ in 0..60 {
+                // Large negative parts: many bands bind, often the vertex α = 0.
+                let x: Vec<f64> = (0..6).map(|_| normal(&mut rng) - 0.7).collect();
+                check_against_clarabel(f, &b, eta, &x, 1e-5);
+                cases += 1;
+            }
+        }
+        assert_eq!(cases, 180);
+    }
+
+    #[test]
+    fn all_negative_channels_give_zero_spectrum() {
+        // With positive filters and a positive spectrum all channels are ≥ 0; all-negative x̂ has
+        // its minimum at α = 0, the most degenerate vertex (every band active).
+        let mut rng = Pcg64::seed_from_u64(4);
+        let b = basis(&mut rng);
+        let f = filters(&mut rng, &b);
+        let u = Unmixer::new(&f, &b, 0.3).unwrap();
+        let mut a = [1.0; J];
+        let info = u
+            .solve_pixel(&[-1.0, -2.0, -0.5, -1.5, -3.0, -1.0], &mut a)
+            .unwrap();
+        assert!(a.iter().all(|v| v.abs() < 1e-12), "{a:?}");
+        assert_eq!(info.active, J);
+    }
+
+    proptest! {
+        #[test]
+        fn scaling_the_channels_scales_the_solution(seed in 0u64..1000, c in 1e-3f64..1e3) {
+            let mut rng = Pcg64::seed_from_u64(seed);
+            let b = basis(&mut rng);
+            let f = filters(&mut rng, &b);
+            let u = Unmixer::new(&f, &b, 0.1).unwrap();
+            let x: Vec<f64> = (0..6).map(|_| normal(&mut rng)).collect();
+            let xc: Vec<f64> = x.iter().map(|v| v * c).collect();
+            let (mut a, mut ac) = ([0.0; J], [0.0; J]);
+            u.solve_pixel(&x, &mut a).unwrap();
+            u.solve_pixel(&xc, &mut ac).unwrap();
+            let norm = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+            for (p, q) in a.iter().zip(&ac) {
+                prop_assert!((p * c - q).abs() <= 1e-9 * c * norm.max(1e-300), "{} vs {}", p * c, q);
+            }
+        }
+    }
+
+    #[test]
+    fn cube_unmixing_matches_the_pixel_solver() {
+        let mut rng = Pcg64::seed_from_u64(5);
+        let b = basis(&mut rng);
+        let f = filters(&mut rng, &b);
+        let u = Unmixer::new(&f, &b, 0.2).unwrap();
+        let (w, h) = (37, 19);
+        let s = smooth_spectra(&mut rng, w * h);
+        let x = &f * (b.transpose() * s);
+        let mut cube = Cube::zeros(w, h, 6);
+        for p in 0..w * h {
+            for j in 0..6 {
+                cube.plane_mut(j)[p] = (x[(j, p)] * (1.0 + 0.4 * normal(&mut rng))) as f32;
+            }
+        }
+        let (out, stats) = u.unmix(&cube).unwrap();
+        assert_eq!((out.width, out.height, out.planes), (w, h, BANDS));
+        assert_eq!(stats.pixels, w * h);
+        assert!(
+            stats.bound_pixels > 10 && stats.bound_pixels <= stats.constrained_pixels,
+            "{stats:?}"
+        );
+        assert!(out.data.iter().all(|&v| v >= 0.0));
+        let mut a = [0.0; J];
+        for p in 0..w * h {
+            let xp: Vec<f64> = (0..6).map(|j| cube.plane(j)[p] as f64).collect();
+            u.solve_pixel(&xp, &mut a).unwrap();
+            let r = &b * DVector::from_column_slice(&a);
+            let scale = r.amax();
+            for k in 0..BANDS {
+                let got = out.plane(k)[p] as f64;
+                assert!(
+                    (got - r[k].max(0.0)).abs() <= 1e-5 * scale,
+                    "pixel {p} band {k}: {got} vs {}",
+                    r[k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let mut rng = Pcg64::seed_from_u64(6);
+        let b = basis(&mut rng);
+        let f = filters(&mut rng, &b);
+        for eta in [-1.0, f64::NAN, f64::INFINITY] {
+            assert!(
+                matches!(Unmixer::new(&f, &b, eta), Err(Error::Numerical(_))),
+                "η = {eta}"
+            );
+        }
+        // Two identical filter responses and no smoothing: H is singular.
+        let mut fs = f.clone();
+        let row = fs.row(0).clone_owned();
+        fs.set_row(1, &row);
+        let fs = fs.rows(0, 5).clone_owned(); // 5 channels for 6 unknowns
+        match Unmixer::new(&fs, &b, 0.0) {
+            Err(Error::Numerical(msg)) => assert!(msg.contains("condition number"), "{msg}"),
+            other => panic!("expected a numerical error, got {other:?}"),
+        }
+        let u = Unmixer::new(&f, &b, 0.1).unwrap();
+        let mut a = [0.0; J];
+        assert!(matches!(
+            u.solve_pixel(&[1.0, f64::NAN, 0.0, 0.0, 0.0, 0.0], &mut a),
+            Err(Error::Numerical(_))
+        ));
+        assert!(matches!(
+            u.solve_pixel(&[1.0; 5], &mut a),
+            Err(Error::Shape(_))
+        ));
+        let mut cube = Cube::zeros(9, 9, 6);
+        cube.plane_mut(3)[40] = f32::NAN;
+        match u.unmix(&cube) {
+            Err(Error::Numerical(msg)) => assert!(msg.contains("(4, 4)"), "{msg}"),
+            other => panic!("expected a numerical error, got {other:?}"),
+        }
+        assert!(matches!(
+            u.unmix(&Cube::zeros(4, 4, 5)),
+            Err(Error::Shape(_))
+        ));
+    }
+}

@@ -1,0 +1,673 @@
+//! Studies of the reconstruction on one simulated frame: the work–precision table (error of the
+//! final cube against the median wall time of demultiplexing + de-aliasing + unmixing, for each
+//! method and setting, with its Pareto front) and the paper's crop-size sweep.
+
+use crate::plot;
+use crate::plot::Series;
+use plotters::prelude::*;
+use serde::Serialize;
+use specmux_core::calibration::Calibration;
+use specmux_core::demux::Demux;
+use specmux_core::demux::WindowShape;
+use specmux_core::demux::SUPER_GAUSSIAN_ORDER;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+use specmux_core::gap::GapConfig;
+use specmux_core::gap::Method;
+use specmux_core::metrics;
+use specmux_core::reconstructor::Reconstructor;
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::Pipeline;
+use specmux_twin::rig::Rig;
+use specmux_twin::run;
+use specmux_twin::scene::Materials;
+use std::path::Path;
+
+/// One simulated frame with its truths and its calibration, simulated once and reconstructed
+/// many times.
+pub struct Simulated {
+    pub exp: Experiment,
+    pub rig: Rig,
+    /// r: the scene's cube.
+    pub truth: Cube,
+    /// x: the true channels.
+    pub channels: Cube,
+    pub frame: Cube,
+    /// The calibration the core built from the twin's captures.
+    pub calibration: Calibration,
+}
+
+/// Run the experiment's forward model and its calibration captures once.
+pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Simulated> {
+    let materials = Materials::load(lib)?;
+    let rig = Rig::build(exp, lib, &materials)?;
+    let (sim, _) = Pipeline::build(exp, &rig, &materials)?.run()?;
+    let calibration = run::calibration(exp, &rig, &sim)?;
+    Ok(Simulated {
+        exp: exp.clone(),
+        truth: sim.scene.cube,
+        channels: sim.channels,
+        frame: sim.frame,
+        calibration,
+        rig,
+    })
+}
+
+/// One reconstruction setting of the work–precision study.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Setting {
+    pub method: Method,
+    /// GAP iterations (0 for `fourier`).
+    pub iterations: usize,
+    pub crop: f64,
+    pub window: WindowShape,
+}
+
+impl Setting {
+    /// Short label, e.g. `gap-tv 20 it, crop 0.25 square`.
+    pub fn label(&self) -> String {
+        let m = match self.method {
+            Method::Fourier => "fourier".to_string(),
+            Method::Gap => format!("gap {} it", self.iterations),
+            Method::GapTv => format!("gap-tv {} it", self.iterations),
+        };
+        let w = match self.window {
+            WindowShape::Square => "square",
+            WindowShape::Circular => "circular",
+            WindowShape::SuperGaussian => "super-gaussian",
+        };
+        format!("{m}, crop {} {w}", self.crop)
+    }
+}
+
+/// The default grid: Fourier at three crops × three window shapes, GAP and GAP-TV at
+/// 1, 2, 5, 10, 20, 50 iterations (crop 0.25, square), and both at 20 iterations with the other
+/// two windows.
+pub fn default_grid() -> Vec<Setting> {
+    let shapes = [
+        WindowShape::Square,
+        WindowShape::Circular,
+        WindowShape::SuperGaussian,
+    ];
+    let mut g = Vec::new();
+    for crop in [0.15, 0.2, 0.25] {
+        for window in shapes {
+            g.push(Setting {
+                method: Method::Fourier,
+                iterations: 0,
+                crop,
+                window,
+            });
+        }
+    }
+    for method in [Method::Gap, Method::GapTv] {
+        for iterations in [1, 2, 5, 10, 20, 50] {
+            g.push(Setting {
+                method,
+                iterations,
+                crop: 0.25,
+                window: WindowShape::Square,
+            });
+        }
+        for window in &shapes[1..] {
+            g.push(Setting {
+                method,
+                iterations: 20,
+                crop: 0.25,
+                window: *window,
+            });
+        }
+    }
+    g
+}
+
+/// One row of the work–precision table.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchRow {
+    pub label: String,
+    pub setting: Setting,
+    /// Final cube r̂ against the true cube.
+    pub psnr_db: f64,
+    pub ssim: f64,
+    pub sam_deg: f64,
+    /// The channel estimate after de-aliasing (x̂ for `fourier`) against the true channels.
+    pub x_psnr_db: f64,
+    /// Median wall time of demultiplex + de-alias + unmix over the repeats.
+    pub seconds: f64,
+    /// Every repeat's wall time, in run order.
+    pub seconds_all: Vec<f64>,
+    /// Median wall time of each stage alone: demultiplex, de-alias, unmix.
+    pub stage_seconds: [f64; 3],
+    /// On the Pareto front of (seconds, psnr_db).
+    pub pareto: bool,
+}
+
+/// Median of a non-empty slice (mean of the middle two for an even count).
+pub fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+/// Indices of the non-dominated points of (cost, value) — less cost and more value are better;
+/// a point is dominated when another has cost ≤ and value ≥ with one of them strict. Returned in
+/// order of increasing cost (so value increases along them too). Exact duplicates both stay.
+pub fn pareto_front(points: &[(f64, f64)]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..points.len())
+        .filter(|&i| points[i].0.is_finite() && points[i].1.is_finite())
+        .collect();
+    // By cost, then by value descending: a point is on the front iff its value beats every
+    // value seen at a lower (or equal, earlier-sorted) cost.
+    idx.sort_by(|&a, &b| {
+        points[a]
+            .0
+            .total_cmp(&points[b].0)
+            .then(points[b].1.total_cmp(&points[a].1))
+    });
+    let mut front: Vec<usize> = Vec::new();
+    for i in idx {
+        match front.last() {
+            Some(&l) if points[l] == points[i] => front.push(i),
+            Some(&l) if points[i].1 <= points[l].1 => {}
+            _ => front.push(i),
+        }
+    }
+    front
+}
+
+/// The reconstructor of `sim`'s rig for one setting.
+fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
+    let mut exp = sim.exp.clone();
+    exp.reconstruct.crop = s.crop;
+    exp.reconstruct.window = s.window;
+    exp.reconstruct.gap.method = s.method;
+    if s.method != Method::Fourier {
+        exp.reconstruct.gap.iterations = s.iterations;
+    }
+    exp.validate()?;
+    Reconstructor::new(
+        &exp.reconstruct,
+        &sim.rig.design(),
+        &sim.calibration,
+        &exp.file,
+    )
+}
+
+/// Reconstruct `sim`'s frame with every setting `repeats` times (the repeats interleaved over
+/// the settings, so that a change of machine load spreads over all of them) and measure it.
+pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Result<Vec<BenchRow>> {
+    if repeats == 0 {
+        return Err(Error::config(
+            "<command line>",
+            "--repeats",
+            0,
+            "must be ≥ 1",
+        ));
+    }
+    let recons = grid
+        .iter()
+        .map(|s| reconstructor(sim, s))
+        .collect::<Result<Vec<_>>>()?;
+    let mut times = vec![Vec::with_capacity(repeats); grid.len()];
+    let mut stages = vec![[(); 3].map(|_| Vec::with_capacity(repeats)); grid.len()];
+    let mut outputs: Vec<Option<(Cube, Cube)>> = vec![None; grid.len()];
+    for _ in 0..repeats {
+        for (k, r) in recons.iter().enumerate() {
+            let out = r.run(&sim.frame, None)?;
+            times[k].push(out.seconds.iter().sum());
+            for (v, d) in stages[k].iter_mut().zip(out.seconds) {
+                v.push(d);
+            }
+            outputs[k].get_or_insert((out.xgap, out.cube));
+        }
+    }
+    let mut rows = Vec::with_capacity(grid.len());
+    for (((s, t), st), out) in grid.iter().zip(times).zip(stages).zip(outputs) {
+        let (x, cube) = out.expect("repeats ≥ 1 ran every setting");
+        let m = metrics::compare(&sim.truth, &cube)?;
+        let mx = metrics::compare(&sim.channels, &x)?;
+        rows.push(BenchRow {
+            label: s.label(),
+            setting: *s,
+            psnr_db: m.psnr_db,
+            ssim: m.ssim,
+            sam_deg: m.sam_deg,
+            x_psnr_db: mx.psnr_db,
+            seconds: median(&t),
+            seconds_all: t,
+            stage_seconds: st.map(|v| median(&v)),
+            pareto: false,
+        });
+    }
+    let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.seconds, r.psnr_db)).collect();
+    for i in pareto_front(&pts) {
+        rows[i].pareto = true;
+    }
+    Ok(rows)
+}
+
+/// The work–precision table as Markdown (also readable as text).
+pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
+    let mut s = String::from(
+        "| setting | r̂ PSNR dB | SSIM | SAM ° | x PSNR dB | median s | demux / de-alias / unmix s | Pareto |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in rows {
+        s += &format!(
+            "| {} | {:.2} | {:.4} | {:.2} | {:.2} | {:.4} | {:.3} / {:.3} / {:.3} | {} |\n",
+            r.label,
+            r.psnr_db,
+            r.ssim,
+            r.sam_deg,
+            r.x_psnr_db,
+            r.seconds,
+            r.stage_seconds[0],
+            r.stage_seconds[1],
+            r.stage_seconds[2],
+            if r.pareto { "●" } else { "" }
+        );
+    }
+    s
+}
+
+/// Final-cube PSNR against median run time, log time axis (ln t drawn linearly and labelled in
+/// seconds, so that the decade below 1 s gets labels too), one colour per method, the Pareto
+/// front as a line through its points.
+pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Result<()> {
+    plot::register_font(path)?;
+    let err = |e: String| Error::Image {
+        path: path.to_path_buf(),
+        msg: e,
+    };
+    let ok: Vec<&BenchRow> = rows
+        .iter()
+        .filter(|r| r.seconds > 0.0 && r.seconds.is_finite() && r.psnr_db.is_finite())
+        .collect();
+    if ok.is_empty() {
+        return Err(err("nothing finite to plot".into()));
+    }
+    let (mut t0, mut t1, mut p0, mut p1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for r in &ok {
+        (t0, t1) = (t0.min(r.seconds), t1.max(r.seconds));
+        (p0, p1) = (p0.min(r.psnr_db), p1.max(r.psnr_db));
+    }
+    let pad = 0.05 * (p1 - p0).max(0.1);
+    let (w, h) = (900u32, 560u32);
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d((t0 / 1.3).ln()..(t1 * 1.3).ln(), (p0 - pad)..(p1 + pad))
+            .map_err(|e| err(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .x_labels(12)
+            .x_label_formatter(&|v| format!("{:.3}", v.exp()))
+            .x_desc("median wall time of demultiplex + de-alias + unmix, s (log)")
+            .y_desc("final cube PSNR, dB")
+            .draw()
+            .map_err(|e| err(e.to_string()))?;
+        for (c, method, name) in [
+            (0, Method::Fourier, "fourier (crops, windows)"),
+            (1, Method::Gap, "gap"),
+            (2, Method::GapTv, "gap-tv"),
+        ] {
+            let color = Palette99::pick(c).to_rgba();
+            let pts: Vec<(f64, f64)> = ok
+                .iter()
+                .filter(|r| r.setting.method == method)
+                .map(|r| (r.seconds.ln(), r.psnr_db))
+                .collect();
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 5, color.filled())))
+                .map_err(|e| err(e.to_string()))?
+                .label(name)
+                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
+        }
+        let mut front: Vec<(f64, f64)> = ok
+            .iter()
+            .filter(|r| r.pareto)
+            .map(|r| (r.seconds.ln(), r.psnr_db))
+            .collect();
+        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart
+            .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))
+            .map_err(|e| err(e.to_string()))?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| err(e.to_string()))?;
+        root.present().map_err(|e| err(e.to_string()))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("plot buffer".into()))?;
+    specmux_io::png::write_png(path, image::DynamicImage::ImageRgb8(img))
+}
+
+/// The paper's crop fractions: 0.05 to 0.4 of the width in steps of 0.025.
+pub fn paper_crops() -> Vec<f64> {
+    (0..=14).map(|i| 0.05 + 0.025 * i as f64).collect()
+}
+
+/// Mean over the channels of one estimate against the true channels.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct ChannelError {
+    pub psnr_db: f64,
+    pub rmse: f64,
+    pub ssim: f64,
+}
+
+fn channel_error(truth: &Cube, est: &Cube) -> Result<ChannelError> {
+    let m = metrics::compare(truth, est)?;
+    Ok(ChannelError {
+        psnr_db: m.psnr_db,
+        rmse: m.rmse,
+        ssim: m.ssim,
+    })
+}
+
+/// One crop of the sweep on one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct CropRow {
+    pub scene: String,
+    pub crop: f64,
+    /// Window size in bins (x, y).
+    pub bins: [usize; 2],
+    /// x̂ of the Fourier crop.
+    pub fourier: ChannelError,
+    /// GAP seeded by that x̂ (None when not asked for).
+    pub gap: Option<ChannelError>,
+    /// Each channel low-passed by the same window alone (no multiplexing).
+    pub bound: ChannelError,
+}
+
+/// Demultiplex `sim`'s frame at every crop in `crops` with the rig's carriers held fixed. The
+/// demultiplexer is built directly (`Demux::new`), bypassing the layout check, so crops above
+/// the largest non-overlapping one (0.25 for the default layout) are measured too, with windows
+/// that overlap their neighbours. With `gap`, each x̂ also seeds GAP with that configuration.
+pub fn sweep_crop(
+    sim: &Simulated,
+    scene: &str,
+    crops: &[f64],
+    gap: Option<&GapConfig>,
+) -> Result<Vec<CropRow>> {
+    let (w, h) = (sim.frame.width, sim.frame.height);
+    let mut cfg = sim.exp.reconstruct.clone();
+    cfg.gap = gap.cloned().unwrap_or_else(|| GapConfig {
+        method: Method::Fourier,
+        ..cfg.gap.clone()
+    });
+    let recon = Reconstructor::new(&cfg, &sim.rig.design(), &sim.calibration, &sim.exp.file)?;
+    let frame = sim.calibration.linearise(&sim.frame)?;
+    let window = sim.exp.reconstruct.window;
+    crops
+        .iter()
+        .map(|&crop| {
+            if !(crop > 0.0 && crop <= 0.5) {
+                return Err(Error::config(
+                    "<command line>",
+                    "crop",
+                    crop,
+                    "must be in (0, 0.5]",
+                ));
+            }
+            let mut d = Demux::new(w, h, &sim.rig.carriers, crop)
+                .with_window(window, SUPER_GAUSSIAN_ORDER)?;
+            if d.dc.wx < 1 || d.dc.wy < 1 {
+                return Err(Error::config(
+                    "<command line>",
+                    "crop",
+                    crop,
+                    &format!("gives an empty window on a {w}×{h} frame"),
+                ));
+            }
+            d = d.with_calibration(&sim.calibration.carriers)?;
+            let zeta = d.run(&frame)?;
+            let xhat = recon.to_channels(&zeta)?;
+            let g = match &recon.gap {
+                Some(s) => Some(channel_error(
+                    &sim.channels,
+                    &recon.to_channels(&s.run(&frame, &zeta, None)?.0)?,
+                )?),
+                None => None,
+            };
+            Ok(CropRow {
+                scene: scene.to_string(),
+                crop,
+                bins: [d.dc.wx, d.dc.wy],
+                fourier: channel_error(&sim.channels, &xhat)?,
+                gap: g,
+                bound: channel_error(&sim.channels, &d.crop_bound(&sim.channels))?,
+            })
+        })
+        .collect()
+}
+
+/// The crop sweep as a Markdown table.
+pub fn sweep_markdown(rows: &[CropRow]) -> String {
+    let mut s = String::from(
+        "| scene | crop | bins | Fourier PSNR dB | RMSE | SSIM | GAP PSNR dB | GAP SSIM | bound PSNR dB |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
+    );
+    for r in rows {
+        let (gp, gs) = r.gap.map_or(("–".into(), "–".into()), |g| {
+            (format!("{:.2}", g.psnr_db), format!("{:.4}", g.ssim))
+        });
+        s += &format!(
+            "| {} | {:.3} | {}×{} | {:.2} | {:.4} | {:.4} | {} | {} | {:.2} |\n",
+            r.scene,
+            r.crop,
+            r.bins[0],
+            r.bins[1],
+            r.fourier.psnr_db,
+            r.fourier.rmse,
+            r.fourier.ssim,
+            gp,
+            gs,
+            r.bound.psnr_db
+        );
+    }
+    s
+}
+
+/// The crop of highest Fourier PSNR per scene, in first-seen scene order.
+pub fn sweep_peaks(rows: &[CropRow]) -> Vec<(String, f64, f64)> {
+    let mut peaks: Vec<(String, f64, f64)> = Vec::new();
+    for r in rows {
+        match peaks.iter_mut().find(|p| p.0 == r.scene) {
+            Some(p) if r.fourier.psnr_db > p.2 => (p.1, p.2) = (r.crop, r.fourier.psnr_db),
+            Some(_) => {}
+            None => peaks.push((r.scene.clone(), r.crop, r.fourier.psnr_db)),
+        }
+    }
+    peaks
+}
+
+/// PSNR against crop, one colour per scene: Fourier solid, GAP dashed.
+pub fn sweep_plot(path: &Path, rows: &[CropRow]) -> Result<()> {
+    let mut series = Vec::new();
+    for (c, (scene, _, _)) in sweep_peaks(rows).into_iter().enumerate() {
+        let of = |f: &dyn Fn(&CropRow) -> Option<f64>| -> Vec<(f64, f64)> {
+            rows.iter()
+                .filter(|r| r.scene == scene)
+                .filter_map(|r| f(r).map(|v| (r.crop, v)))
+                .collect()
+        };
+        series.push(Series {
+            label: format!("{scene} Fourier"),
+            color: c,
+            dashed: false,
+            points: of(&|r| Some(r.fourier.psnr_db)),
+        });
+        let g = of(&|r| r.gap.map(|g| g.psnr_db));
+        if !g.is_empty() {
+            series.push(Series {
+                label: format!("{scene} GAP"),
+                color: c,
+                dashed: true,
+                points: g,
+            });
+        }
+    }
+    plot::line_plot(
+        path,
+        "Demultiplexed channels against crop size (default carriers held fixed)",
+        "crop (fraction of the width)",
+        "mean channel PSNR, dB",
+        &series,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pareto_front_of_a_hand_made_set() {
+        // (time, psnr): 0 and 2 and 4 are non-dominated; 1 is beaten by 0 (slower, worse),
+        // 3 by 2 (same time, worse), 5 by 4 (slower, same value); 6 is not finite.
+        let pts = [
+            (1.0, 20.0),
+            (2.0, 19.0),
+            (3.0, 25.0),
+            (3.0, 24.0),
+            (10.0, 30.0),
+            (11.0, 30.0),
+            (f64::NAN, 40.0),
+        ];
+        assert_eq!(pareto_front(&pts), vec![0, 2, 4]);
+        // No point of the front is dominated, and every other point is.
+        let front = pareto_front(&pts);
+        let dominated = |i: usize| {
+            pts.iter().enumerate().any(|(j, q)| {
+                j != i && q.0 <= pts[i].0 && q.1 >= pts[i].1 && (q.0 < pts[i].0 || q.1 > pts[i].1)
+            })
+        };
+        for i in 0..6 {
+            assert_eq!(front.contains(&i), !dominated(i), "point {i}");
+        }
+        assert_eq!(pareto_front(&[]), Vec::<usize>::new());
+        // Identical points are both kept; a single point is its own front.
+        assert_eq!(pareto_front(&[(1.0, 1.0), (1.0, 1.0)]), vec![0, 1]);
+        assert_eq!(pareto_front(&[(5.0, -3.0)]), vec![0]);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn pareto_front_is_exactly_the_non_dominated_set(
+            pts in proptest::collection::vec((0u8..8, 0u8..8), 0..30)
+        ) {
+            let p: Vec<(f64, f64)> = pts.iter().map(|&(a, b)| (a as f64, b as f64)).collect();
+            let front = pareto_front(&p);
+            for i in 0..p.len() {
+                let dom = p.iter().any(|q| q.0 <= p[i].0 && q.1 >= p[i].1 && q != &p[i]);
+                proptest::prop_assert_eq!(front.contains(&i), !dom);
+            }
+            // Along the front cost rises and value rises.
+            for w in front.windows(2) {
+                proptest::prop_assert!(p[w[0]].0 <= p[w[1]].0 && p[w[0]].1 <= p[w[1]].1);
+            }
+        }
+    }
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 3.0, 2.0]), 2.5);
+        assert_eq!(median(&[7.0]), 7.0);
+    }
+
+    fn tiny() -> Simulated {
+        let mut exp = Experiment::prototype();
+        exp.scene.size = [32, 32];
+        exp.validate().unwrap();
+        simulate(&exp, &Library::default_root()).unwrap()
+    }
+
+    #[test]
+    fn crop_sweep_is_finite_and_the_bound_improves_with_the_crop() {
+        let sim = tiny();
+        let cfg = GapConfig {
+            iterations: 3,
+            levels: 2,
+            ..Default::default()
+        };
+        let rows = sweep_crop(&sim, "tiny", &paper_crops(), Some(&cfg)).unwrap();
+        assert_eq!(rows.len(), 15);
+        for r in &rows {
+            let g = r.gap.unwrap();
+            for v in [
+                r.fourier.psnr_db,
+                r.fourier.rmse,
+                r.fourier.ssim,
+                g.psnr_db,
+                g.ssim,
+                r.bound.psnr_db,
+            ] {
+                assert!(v.is_finite(), "crop {}: {r:?}", r.crop);
+            }
+        }
+        // Without multiplexing a larger window only keeps more of each channel.
+        for w in rows.windows(2) {
+            assert!(w[1].bound.rmse <= w[0].bound.rmse + 1e-9, "{w:?}");
+        }
+        // Past 0.25 the windows overlap their neighbours: the Fourier estimate must fall
+        // below its own crop bound by more than it does at 0.25.
+        let at = |c: f64| rows.iter().find(|r| (r.crop - c).abs() < 1e-9).unwrap();
+        let gap_to_bound = |r: &CropRow| r.bound.psnr_db - r.fourier.psnr_db;
+        assert!(gap_to_bound(at(0.4)) > gap_to_bound(at(0.25)));
+        assert_eq!(sweep_peaks(&rows).len(), 1);
+        assert!(sweep_crop(&sim, "tiny", &[0.0], None).is_err());
+    }
+
+    #[test]
+    fn work_precision_rows_are_finite_and_the_front_is_marked() {
+        let sim = tiny();
+        let grid = [
+            Setting {
+                method: Method::Fourier,
+                iterations: 0,
+                crop: 0.25,
+                window: WindowShape::Circular,
+            },
+            Setting {
+                method: Method::Gap,
+                iterations: 2,
+                crop: 0.25,
+                window: WindowShape::Square,
+            },
+        ];
+        let rows = work_precision(&sim, &grid, 2).unwrap();
+        assert_eq!(rows.len(), 2);
+        for r in &rows {
+            assert!(r.psnr_db.is_finite() && r.ssim.is_finite() && r.sam_deg.is_finite());
+            assert_eq!(r.seconds_all.len(), 2);
+        }
+        assert!(rows.iter().any(|r| r.pareto));
+        assert!(work_precision(&sim, &grid, 0).is_err());
+        let e = work_precision(
+            &sim,
+            &[Setting {
+                crop: 0.3,
+                ..grid[0]
+            }],
+            1,
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("overlap"), "{e}");
+    }
+}

@@ -1,0 +1,454 @@
+//! One function per CLI command: run the library, write the files, return the text to print.
+
+use crate::plot::Colorimetry;
+use specmux_core::spectral::{Grid, Library};
+use specmux_core::{Error, Result};
+use specmux_io::exr as exr_io;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::run::{self, RunData, RunReport};
+use std::path::Path;
+
+/// Append one formatted line to the command's output.
+macro_rules! say {
+    ($text:ident, $($t:tt)*) => {{
+        use std::fmt::Write;
+        let _ = writeln!($text, $($t)*);
+    }};
+}
+
+/// The experiment a `--scene` names: a built-in scene or a TOML file.
+pub fn experiment_for(scene: &str, size: Option<usize>) -> Result<Experiment> {
+    let mut exp = if scene.ends_with(".toml") {
+        Experiment::load(Path::new(scene))?
+    } else {
+        let mut e = Experiment::prototype();
+        e.scene.source = scene.to_string();
+        e
+    };
+    if let Some(n) = size {
+        exp.scene.size = [n, n];
+    }
+    exp.validate()?;
+    Ok(exp)
+}
+
+fn load(path: &Path) -> Result<Experiment> {
+    Experiment::load(path)
+}
+
+fn band_names(grid: &Grid) -> Vec<String> {
+    grid.wavelengths()
+        .into_iter()
+        .map(exr_io::band_name)
+        .collect()
+}
+
+pub fn demo(scene: &str, size: Option<usize>, out: &Path, lib: &Library) -> Result<String> {
+    let mut text = String::new();
+    let exp = experiment_for(scene, size)?;
+    let (rep, data) = run::run(&exp, lib)?;
+    say!(text, "{}", rep.table());
+    write_run_files(&exp, &rep, &data, out, lib)?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+fn write_run_files(
+    exp: &Experiment,
+    rep: &RunReport,
+    d: &RunData,
+    out: &Path,
+    lib: &Library,
+) -> Result<()> {
+    let grid = exp.scene.grid(&exp.file)?;
+    exr_io::write(&out.join("frame.exr"), &d.frame, &["Y".to_string()])?;
+    specmux_io::png::plane_png(&out.join("frame.png"), &d.frame, 0)?;
+    exr_io::write(&out.join("cube.exr"), &d.cube, &band_names(&grid))?;
+    let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
+    exr_io::write(&out.join("channels.exr"), &d.xhat, &ch)?;
+    let light = match exp.scene.quantity {
+        specmux_twin::scene::Quantity::Reflectance => Some(lib.curve(&exp.scene.illuminant)?),
+        specmux_twin::scene::Quantity::Radiance => None,
+    };
+    let col = Colorimetry::new(lib, &grid, light.as_ref())?;
+    let exposure = if light.is_some() {
+        1.0
+    } else {
+        1.0 / f64::from(d.truth.max().max(f32::MIN_POSITIVE))
+    };
+    for (name, cube) in [("truth_rgb.png", &d.truth), ("cube_rgb.png", &d.cube)] {
+        specmux_io::png::write_png(
+            &out.join(name),
+            image::DynamicImage::ImageRgb8(col.preview(cube, exposure)?),
+        )?;
+    }
+    crate::plot::spectra_plot(&out.join("spectra.png"), &grid, &d.truth, &d.cube)?;
+    specmux_io::json::write_json(&out.join("report.json"), rep)
+}
+
+pub fn bench(
+    scene: &str,
+    out: &Path,
+    repeats: usize,
+    size: Option<usize>,
+    lib: &Library,
+) -> Result<String> {
+    let mut text = String::new();
+    let exp = experiment_for(scene, size)?;
+    let sim = crate::bench::simulate(&exp, lib)?;
+    let threads = rayon::current_num_threads();
+    say!(
+        text,
+        "{}: {}×{}, {repeats} timed runs per setting, {threads} threads",
+        exp.file,
+        sim.frame.width,
+        sim.frame.height
+    );
+    let rows = crate::bench::work_precision(&sim, &crate::bench::default_grid(), repeats)?;
+    let md = crate::bench::work_precision_markdown(&rows);
+    say!(text, "{md}");
+    specmux_io::atomic::write_bytes(&out.join("bench.md"), md.as_bytes())?;
+    specmux_io::json::write_json(&out.join("bench.json"), &rows)?;
+    crate::bench::work_precision_plot(
+        &out.join("pareto.png"),
+        &format!(
+            "{} {}×{}: error against run time ({threads} threads)",
+            scene, sim.frame.width, sim.frame.height
+        ),
+        &rows,
+    )?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn sweep_crop(
+    scenes: &[String],
+    out: &Path,
+    size: Option<usize>,
+    no_gap: bool,
+    lib: &Library,
+) -> Result<String> {
+    let mut text = String::new();
+    let mut rows = Vec::new();
+    for scene in scenes {
+        let exp = experiment_for(scene, size)?;
+        let sim = crate::bench::simulate(&exp, lib)?;
+        let cfg = specmux_core::gap::GapConfig {
+            method: specmux_core::gap::Method::Gap,
+            ..exp.reconstruct.gap.clone()
+        };
+        let name = Path::new(scene)
+            .file_stem()
+            .map_or(scene.clone(), |s| s.to_string_lossy().into_owned());
+        let r = crate::bench::sweep_crop(
+            &sim,
+            &name,
+            &crate::bench::paper_crops(),
+            (!no_gap).then_some(&cfg),
+        )?;
+        rows.extend(r);
+    }
+    let md = crate::bench::sweep_markdown(&rows);
+    say!(text, "{md}");
+    for (scene, crop, psnr) in crate::bench::sweep_peaks(&rows) {
+        say!(
+            text,
+            "{scene}: Fourier PSNR peaks at crop {crop:.3} ({psnr:.2} dB)"
+        );
+    }
+    specmux_io::atomic::write_bytes(&out.join("sweep.md"), md.as_bytes())?;
+    specmux_io::json::write_json(&out.join("sweep.json"), &rows)?;
+    crate::bench::sweep_plot(&out.join("sweep_crop.png"), &rows)?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn sweep(
+    scene: &str,
+    vary: &[String],
+    out: &Path,
+    size: Option<usize>,
+    lib: &Library,
+) -> Result<String> {
+    let mut text = String::new();
+    let exp = experiment_for(scene, size)?;
+    let vary = vary
+        .iter()
+        .map(|v| crate::sweep::Vary::parse(v))
+        .collect::<Result<Vec<_>>>()?;
+    let rows = crate::sweep::sweep(&exp, &vary, lib)?;
+    let md = crate::sweep::markdown(&vary, &rows);
+    say!(
+        text,
+        "{}: {}×{}\n{md}",
+        exp.file,
+        exp.scene.size[0],
+        exp.scene.size[1]
+    );
+    specmux_io::atomic::write_bytes(&out.join("sweep.md"), md.as_bytes())?;
+    specmux_io::json::write_json(&out.join("sweep.json"), &rows)?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn patterns(
+    scene: &str,
+    out: &Path,
+    size: Option<usize>,
+    study: Option<&[f64]>,
+    lib: &Library,
+) -> Result<String> {
+    let mut text = String::new();
+    use crate::patterns as pr;
+    let exp = experiment_for(scene, size)?;
+    let materials = specmux_twin::scene::Materials::load(lib)?;
+    let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
+    let optics = exp.rig.optics();
+    let lights = rig.pattern_lights(&exp)?;
+    if let Some(radii) = study {
+        let t = std::time::Instant::now();
+        let rows = pr::dither_study(
+            &optics,
+            &rig.carriers,
+            &lights,
+            rig.width,
+            rig.height,
+            exp.reconstruct.crop,
+            radii,
+        )?;
+        let md = pr::study_table(&rows);
+        say!(
+            text,
+            "{md}\n{} runs in {:.1} s",
+            rows.len(),
+            t.elapsed().as_secs_f64()
+        );
+        specmux_io::atomic::write_bytes(&out.join("study.md"), md.as_bytes())?;
+        specmux_io::json::write_json(&out.join("study.json"), &rows)?;
+        say!(text, "wrote {}", out.display());
+        return Ok(text);
+    }
+    let (rep, set) = pr::pattern_report(
+        &optics,
+        &rig.carriers,
+        &lights,
+        rig.width,
+        rig.height,
+        exp.reconstruct.crop,
+    )?;
+    for s in &rep.stages {
+        say!(text, "{s}");
+    }
+    say!(
+        text,
+        "\n{:<3} {:>14} {:>10} {:>10} {:>7} {:>9} {:>10} {:>10} {:>10}",
+        "ch",
+        "carrier",
+        "rms err",
+        "residual",
+        "gain",
+        "phase °",
+        "2ω",
+        "worst x",
+        "through"
+    );
+    for (i, c) in rep.channels.iter().enumerate() {
+        let worst = c
+            .crosstalk
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != i)
+            .map(|(_, v)| *v)
+            .fold(0.0, f64::max);
+        say!(
+            text,
+            "{:<3} {:>14} {:>10.4} {:>10.4} {:>7.3} {:>9.2} {:>10.2e} {:>10.2e} {:>10.4}",
+            i,
+            format!("({},{})", c.fx, c.fy),
+            c.rel_rms_error,
+            c.residual_error,
+            c.gain,
+            c.gain_phase_rad.to_degrees(),
+            c.harmonic_2w,
+            worst,
+            c.throughput
+        );
+    }
+    say!(
+        text,
+        "\ncrosstalk (energy in window j / own window), rows = channel i:"
+    );
+    for c in &rep.channels {
+        let row: Vec<String> = c.crosstalk.iter().map(|v| format!("{v:9.2e}")).collect();
+        say!(text, "{}", row.join(" "));
+    }
+    pr::write_pattern_pngs(&set, out)?;
+    specmux_io::json::write_json(&out.join("patterns.json"), &rep)?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn timing(scene: &str, out: &Path) -> Result<String> {
+    let mut text = String::new();
+    let exp = experiment_for(scene, None)?;
+    let cfg = exp.rig.timing.clone().ok_or_else(|| {
+        Error::config(
+            &exp.file,
+            "rig.timing",
+            "absent",
+            "the experiment has no [rig.timing] section to report on",
+        )
+    })?;
+    let tw = specmux_twin::timing::weights(&cfg)?;
+    say!(
+        text,
+        "exposure {} s = {:.4} wheel turns; spot on a spoke {:.2} % of the time",
+        cfg.camera.exposure_s,
+        tw.turns_per_exposure,
+        100.0 * tw.spoke_fraction
+    );
+    say!(text, "weights w_ik (rows: filter i, columns: pattern k):");
+    for row in &tw.w {
+        let r: Vec<String> = row.iter().map(|v| format!("{v:8.5}")).collect();
+        say!(text, "{}", r.join(" "));
+    }
+    for w in &tw.warnings {
+        say!(text, "warning: {w}");
+    }
+    if tw.warnings.is_empty() {
+        say!(
+            text,
+            "no warnings: whole turns, aligned, within the DMD's and the camera's rates"
+        );
+    }
+    crate::timeline::timeline_png(&cfg, &out.join("timeline.png"))?;
+    specmux_io::json::write_json(&out.join("timing.json"), &tw)?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn ptc(scene: Option<&str>, size: usize, out: &Path) -> Result<String> {
+    let mut text = String::new();
+    let cfg = match scene {
+        Some(s) => experiment_for(s, None)?.rig.sensor.unwrap_or_default(),
+        None => specmux_twin::sensor::SensorConfig::default(),
+    };
+    let sensor = specmux_twin::sensor::Sensor::new(&cfg, size, size)?;
+    let r = specmux_twin::sensor::photon_transfer(
+        &sensor,
+        &specmux_twin::sensor::default_levels(cfg.full_well_e),
+    )?;
+    say!(
+        text,
+        "{:<22} {:>12} {:>12}",
+        "EMVA 1288",
+        "measured",
+        "given"
+    );
+    for (name, m, g) in [
+        ("K (DN/e⁻)", r.k_dn_per_e, cfg.gain_dn_per_e),
+        (
+            "dark noise (e⁻)",
+            r.read_noise_e,
+            (cfg.read_noise_e.powi(2) + cfg.dark_electrons()).sqrt(),
+        ),
+        ("full well (e⁻)", r.full_well_e, cfg.full_well_e),
+        (
+            "PRNU (%)",
+            100.0 * r.prnu_fraction,
+            100.0 * cfg.prnu_fraction,
+        ),
+        ("DSNU (e⁻)", r.dsnu_e, cfg.dsnu_e),
+    ] {
+        say!(text, "{name:<22} {m:>12.4} {g:>12.4}");
+    }
+    say!(
+        text,
+        "K standard error {:.2e} DN/e⁻ over {} pixels",
+        r.k_stderr_dn_per_e,
+        r.pixels
+    );
+    crate::ptc::plot_ptc(&r, &out.join("ptc.png"))?;
+    specmux_io::json::write_json(&out.join("ptc.json"), &r)?;
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn simulate(path: &Path, explain: bool, out: &Path, lib: &Library) -> Result<String> {
+    let mut text = String::new();
+    let exp = load(path)?;
+    let materials = specmux_twin::scene::Materials::load(lib)?;
+    let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
+    let pipeline = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?;
+    say!(text, "{}", pipeline.explain());
+    if explain {
+        return Ok(text);
+    }
+    let (sim, times) = pipeline.run()?;
+    exr_io::write(&out.join("frame.exr"), &sim.frame, &["Y".to_string()])?;
+    specmux_io::png::plane_png(&out.join("frame.png"), &sim.frame, 0)?;
+    let scene = &sim.scene;
+    exr_io::write(
+        &out.join("truth.exr"),
+        &scene.cube,
+        &band_names(&scene.grid),
+    )?;
+    specmux_io::json::write_json(&out.join("simulate.json"), &times)?;
+    for t in &times {
+        say!(text, "{:<15} {:>8.4} s", t.stage, t.seconds);
+    }
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+pub fn reconstruct(
+    frame_path: &Path,
+    exp: Option<&Path>,
+    truth: Option<&Path>,
+    out: &Path,
+    lib: &Library,
+) -> Result<String> {
+    let mut text = String::new();
+    let mut exp = match exp {
+        Some(p) => load(p)?,
+        None => Experiment::prototype(),
+    };
+    let (frame, _) = exr_io::read(frame_path)?;
+    if frame.planes != 1 {
+        return Err(Error::Exr {
+            path: frame_path.to_path_buf(),
+            msg: format!("a frame has one channel, this file has {}", frame.planes),
+        });
+    }
+    exp.scene.size = [frame.width, frame.height];
+    exp.validate()?;
+    let materials = specmux_twin::scene::Materials::load(lib)?;
+    let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
+    // The calibration frames of this rig, as the twin captures them.
+    let (sim, _) = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?.run()?;
+    let recon = run::reconstructor(&exp, &rig, &sim)?;
+    let r = recon.run(&frame, None)?;
+    let [t_demux, t_gap, t_unmix] = r.seconds;
+    let (cube, stats) = (r.cube, r.unmix);
+    exr_io::write(&out.join("cube.exr"), &cube, &band_names(&rig.grid))?;
+    say!(text, 
+        "demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s ({} pixels bound by r ≥ 0)",
+        stats.constrained_pixels
+    );
+    if let Some(tp) = truth {
+        let (tc, _) = exr_io::read(tp)?;
+        let m = specmux_core::metrics::compare(&tc, &cube)?;
+        say!(
+            text,
+            "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {:.2}°",
+            tp.display(),
+            m.psnr_db,
+            m.ssim,
+            m.nrmse,
+            m.sam_deg
+        );
+        specmux_io::json::write_json(&out.join("metrics.json"), &m)?;
+    }
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}

@@ -1,0 +1,256 @@
+//! Parameter sweeps: run one experiment over a grid of values of any of its keys
+//! (`--vary rig.sensor.electrons_at_full_scale=10;100;1000`) and tabulate the error of every
+//! run against the truth with its wall time. A run the program refuses (a singular crosstalk
+//! matrix, say) stays in the table with its one-line reason.
+
+use serde::Serialize;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+use specmux_core::spectral::Library;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::run;
+
+/// One swept key and its values (TOML literals).
+#[derive(Clone, Debug)]
+pub struct Vary {
+    pub key: String,
+    pub values: Vec<toml::Value>,
+}
+
+impl Vary {
+    /// Parse `dotted.key=v1;v2;…`, each value a TOML literal (a bare word is taken as a string).
+    pub fn parse(arg: &str) -> Result<Vary> {
+        let bad = |why: &str| Error::config("<command line>", "--vary", format!("\"{arg}\""), why);
+        let (key, vals) = arg
+            .split_once('=')
+            .ok_or_else(|| bad("expected KEY=V1;V2;…"))?;
+        let key = key.trim();
+        if key.is_empty() || key.split('.').any(str::is_empty) {
+            return Err(bad("the key must be a dotted path such as rig.sensor.bits"));
+        }
+        let values = vals
+            .split(';')
+            .map(|v| literal(v.trim()).map_err(|e| bad(&e)))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Vary {
+            key: key.to_string(),
+            values,
+        })
+    }
+}
+
+/// A TOML literal (`1e4`, `"none"`, `[0, 1e-4]`, `true`); a bare word becomes a string.
+fn literal(v: &str) -> std::result::Result<toml::Value, String> {
+    if v.is_empty() {
+        return Err("an empty value".into());
+    }
+    let parsed = toml::from_str::<toml::Table>(&format!("v = {v}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"));
+    match parsed {
+        Some(x) => Ok(x),
+        None if v.chars().all(|c| c.is_alphanumeric() || "-_/".contains(c)) => {
+            Ok(toml::Value::String(v.to_string()))
+        }
+        None => Err(format!("`{v}` is not a TOML value")),
+    }
+}
+
+/// Set `key` (dotted) in a TOML document, creating the tables on the way.
+fn set(doc: &mut toml::Table, key: &str, value: toml::Value) {
+    let mut parts: Vec<&str> = key.split('.').collect();
+    let last = parts.pop().expect("a validated key has a part");
+    let mut t = doc;
+    for p in parts {
+        let e = t
+            .entry(p)
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        if !e.is_table() {
+            *e = toml::Value::Table(toml::Table::new());
+        }
+        t = e.as_table_mut().expect("made a table above");
+    }
+    t.insert(last.to_string(), value);
+}
+
+/// The experiment with the given (key, value) pairs applied, parsed and validated as a file
+/// would be (an unknown key or a value out of range is refused with its name).
+pub fn with_values(base: &Experiment, set_to: &[(String, toml::Value)]) -> Result<Experiment> {
+    let mut doc = toml::Table::try_from(base).map_err(|e| Error::Toml {
+        file: base.file.clone(),
+        msg: e.to_string(),
+    })?;
+    for (k, v) in set_to {
+        set(&mut doc, k, v.clone());
+    }
+    let text = toml::to_string(&doc).map_err(|e| Error::Toml {
+        file: base.file.clone(),
+        msg: e.to_string(),
+    })?;
+    let label: Vec<String> = set_to.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    Experiment::from_toml(&text, &format!("{} with {}", base.file, label.join(", ")))
+}
+
+/// Every combination of the swept values (the last key varies fastest).
+pub fn grid(vary: &[Vary]) -> Vec<Vec<(String, toml::Value)>> {
+    vary.iter().fold(vec![Vec::new()], |acc, v| {
+        acc.iter()
+            .flat_map(|point| {
+                v.values.iter().map(move |x| {
+                    let mut p = point.clone();
+                    p.push((v.key.clone(), x.clone()));
+                    p
+                })
+            })
+            .collect()
+    })
+}
+
+/// One run of the sweep: the values, then the error of the channels and of the cube.
+#[derive(Clone, Debug, Serialize)]
+pub struct SweepRow {
+    pub values: Vec<String>,
+    /// Mean PSNR of the reconstructed channels x̂ (after de-aliasing) against the true x.
+    pub channels_psnr_db: Option<f64>,
+    pub cube_psnr_db: Option<f64>,
+    pub cube_ssim: Option<f64>,
+    pub cube_sam_deg: Option<f64>,
+    /// Smallest and largest carrier gain |ĝ|/½ over the channels (1 with ideal sinusoids).
+    pub carrier_gain: Option<(f64, f64)>,
+    /// Reconstruction of one frame (calibration, demultiplexing, crosstalk, de-aliasing, unmixing).
+    pub seconds: Option<f64>,
+    /// Why the run was refused, if it was.
+    pub refused: Option<String>,
+}
+
+/// Run `base` at every point of the grid.
+pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<SweepRow>> {
+    let mut rows = Vec::new();
+    let points = grid(vary);
+    for (n, point) in points.iter().enumerate() {
+        let values: Vec<String> = point.iter().map(|(_, v)| v.to_string()).collect();
+        eprintln!("sweep {}/{}: {}", n + 1, points.len(), values.join(", "));
+        let exp = with_values(base, point)?;
+        let row = match run::run(&exp, lib) {
+            Ok((rep, _)) => {
+                let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));
+                let x = find("gap").or_else(|| find("demultiplex"));
+                let cube = find("unmix");
+                SweepRow {
+                    values,
+                    channels_psnr_db: x.map(|r| r.psnr_db),
+                    cube_psnr_db: cube.map(|r| r.psnr_db),
+                    cube_ssim: cube.map(|r| r.ssim),
+                    cube_sam_deg: cube.map(|r| r.sam_deg),
+                    carrier_gain: rep
+                        .channels
+                        .iter()
+                        .map(|c| c.carrier_gain)
+                        .fold(None, |a, g| {
+                            let (lo, hi) = a.unwrap_or((g, g));
+                            Some((lo.min(g), hi.max(g)))
+                        }),
+                    seconds: Some(rep.reconstruction_seconds),
+                    refused: None,
+                }
+            }
+            Err(e) => SweepRow {
+                values,
+                channels_psnr_db: None,
+                cube_psnr_db: None,
+                cube_ssim: None,
+                cube_sam_deg: None,
+                carrier_gain: None,
+                seconds: None,
+                refused: Some(e.to_string()),
+            },
+        };
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+/// The sweep as a Markdown table.
+pub fn markdown(vary: &[Vary], rows: &[SweepRow]) -> String {
+    let f = |v: Option<f64>, p: usize| v.map_or("—".to_string(), |x| format!("{x:.p$}"));
+    let keys: Vec<&str> = vary.iter().map(|v| v.key.as_str()).collect();
+    let mut s = format!(
+        "| {} | carrier gain | x̂ PSNR dB | cube PSNR dB | cube SSIM | cube SAM ° | recon s | note |\n|{}---|---|---|---|---|---|---|\n",
+        keys.join(" | "),
+        "---|".repeat(keys.len())
+    );
+    for r in rows {
+        let gain = r
+            .carrier_gain
+            .map_or("—".to_string(), |(lo, hi)| format!("{lo:.3}–{hi:.3}"));
+        s += &format!(
+            "| {} | {gain} | {} | {} | {} | {} | {} | {} |\n",
+            r.values.join(" | "),
+            f(r.channels_psnr_db, 2),
+            f(r.cube_psnr_db, 2),
+            f(r.cube_ssim, 4),
+            f(r.cube_sam_deg, 2),
+            f(r.seconds, 3),
+            r.refused.as_deref().unwrap_or("")
+        );
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parse_literals_and_words() {
+        let v = Vary::parse("rig.sensor.electrons_at_full_scale=10;1e5").unwrap();
+        assert_eq!(
+            v.values,
+            vec![toml::Value::Integer(10), toml::Value::Float(1e5)]
+        );
+        let v = Vary::parse("reconstruct.crosstalk=timing;none").unwrap();
+        assert_eq!(v.values[1], toml::Value::String("none".into()));
+        let v = Vary::parse("rig.timing.dmd.delays_s=[0, 1e-4]").unwrap();
+        assert!(v.values[0].is_array());
+        assert!(Vary::parse("nokey").is_err());
+        assert!(Vary::parse("a..b=1").is_err());
+        assert!(Vary::parse("a=1;{").is_err());
+    }
+
+    #[test]
+    fn grid_is_the_cartesian_product() {
+        let a = Vary::parse("a=1;2").unwrap();
+        let b = Vary::parse("b=x;y;z").unwrap();
+        let g = grid(&[a, b]);
+        assert_eq!(g.len(), 6);
+        assert_eq!(g[1][0].1, toml::Value::Integer(1));
+        assert_eq!(g[1][1].1, toml::Value::String("y".into()));
+    }
+
+    #[test]
+    fn values_are_applied_and_checked_like_a_file() {
+        let base = Experiment::prototype();
+        let e = with_values(
+            &base,
+            &[
+                ("reconstruct.eta".into(), toml::Value::Float(50.0)),
+                ("rig.sensor.bits".into(), toml::Value::Integer(10)),
+            ],
+        )
+        .unwrap();
+        assert_eq!(e.reconstruct.eta, 50.0);
+        assert_eq!(e.rig.sensor.unwrap().bits, 10);
+        let err = with_values(
+            &base,
+            &[("reconstruct.etaa".into(), toml::Value::Float(1.0))],
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("etaa"), "{err}");
+        let err = with_values(
+            &base,
+            &[("reconstruct.eta".into(), toml::Value::Float(-1.0))],
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("reconstruct.eta"), "{err}");
+    }
+}

@@ -1,0 +1,1 @@
+//! Fixed-width text tables of the reports, as the CLI prints them.

@@ -1,0 +1,204 @@
+//! The timeline plot of one exposure: wheel segment (with spoke mixing), pattern shown and
+//! exposure window, zoomed on the exposure's start and end, with the weight matrix and warnings.
+
+use plotters::prelude::*;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+use specmux_twin::timing::TimingConfig;
+use specmux_twin::timing::{weights, Schedule, TimingWeights};
+use std::path::Path;
+
+const WIDTH: u32 = 1500;
+const PANELS_HEIGHT: u32 = 560;
+const LINE: u32 = 22;
+
+/// Segment/pattern colour i of n (hue wheel, so any n works).
+fn colour(i: usize, n: usize) -> HSLColor {
+    HSLColor(i as f64 / n as f64, 0.65, 0.55)
+}
+
+fn plot_error(path: &Path, e: impl std::fmt::Display) -> Error {
+    Error::Image {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    }
+}
+
+/// Write the timeline PNG of one exposure of `cfg` to `path` (atomically).
+pub fn timeline_png(cfg: &TimingConfig, path: &Path) -> Result<()> {
+    let tw = weights(cfg)?;
+    let s = Schedule::new(cfg);
+    crate::plot::register_font(path)?;
+    let text_lines = 3 + s.n + tw.warnings.len();
+    let height = PANELS_HEIGHT + LINE * text_lines as u32 + 20;
+    let mut buf = vec![255u8; (WIDTH * height * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (WIDTH, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| plot_error(path, e))?;
+        let (top, bottom) = root.split_vertically(PANELS_HEIGHT);
+        let (t0, t) = (cfg.camera.start_s, cfg.camera.exposure_s);
+        let p = s.period;
+        let windows = if t <= 3.0 * p {
+            vec![("the whole exposure", t0 - 0.5 * p, t0 + t + 0.5 * p)]
+        } else {
+            vec![
+                (
+                    "exposure start: the first turns",
+                    t0 - 0.5 * p,
+                    t0 + 2.5 * p,
+                ),
+                (
+                    "exposure end: the last turns",
+                    t0 + t - 2.0 * p,
+                    t0 + t + 0.5 * p,
+                ),
+            ]
+        };
+        let panels = top.split_evenly((1, windows.len()));
+        for (area, (title, a, b)) in panels.iter().zip(windows) {
+            draw_panel(area, &s, title, a, b, t0, t0 + t).map_err(|e| plot_error(path, e))?;
+        }
+        draw_text(&bottom, cfg, &tw).map_err(|e| plot_error(path, e))?;
+        root.present().map_err(|e| plot_error(path, e))?;
+    }
+    let img = image::RgbImage::from_raw(WIDTH, height, buf)
+        .ok_or_else(|| plot_error(path, "buffer size"))?;
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| plot_error(path, e))?;
+    specmux_io::atomic::write_bytes(path, &png)
+}
+
+type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// One zoom window: lanes (top to bottom) wheel segment fractions, pattern shown, exposure.
+fn draw_panel(
+    area: &Area,
+    s: &Schedule,
+    title: &str,
+    a: f64,
+    b: f64,
+    exp_a: f64,
+    exp_b: f64,
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let ms = 1e3;
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(10)
+        .build_cartesian_2d(a * ms..b * ms, 0.0..3.4)?;
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .disable_y_axis()
+        .x_desc("time after the index pulse (ms)")
+        .x_label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 16))
+        .draw()?;
+    // Wheel lane: stacked light fractions per segment, sampled finely enough to show a spoke.
+    let samples = 3000;
+    let dt = (b - a) / samples as f64;
+    let mut rects = Vec::new();
+    for m in 0..samples {
+        let t = a + (m as f64 + 0.5) * dt;
+        let mut y = 2.2;
+        for (i, f) in s.light_fractions(t).iter().enumerate() {
+            if *f > 0.0 {
+                let top = y + 0.9 * f;
+                rects.push(Rectangle::new(
+                    [((t - 0.5 * dt) * ms, y), ((t + 0.5 * dt) * ms, top)],
+                    colour(i, s.n).filled(),
+                ));
+                y = top;
+            }
+        }
+    }
+    chart.draw_series(rects)?;
+    // Pattern lane: each slot occurrence in the window.
+    let mut labels = Vec::new();
+    for (k, &(start, dur)) in s.slots.iter().enumerate() {
+        let mut t = start + ((a - start) / s.period).floor() * s.period;
+        while t < b {
+            let (u, v) = (t.max(a), (t + dur).min(b));
+            if v > u {
+                chart.draw_series(std::iter::once(Rectangle::new(
+                    [(u * ms, 1.2), (v * ms, 2.0)],
+                    colour(k, s.n).filled(),
+                )))?;
+                labels.push((format!("p{k}"), (0.5 * (u + v) * ms, 1.75)));
+            }
+            t += s.period;
+        }
+    }
+    // Segment names at the middle of each segment passage.
+    for i in 0..s.n {
+        let end = s.theta_deg.get(i + 1).copied().unwrap_or(360.0);
+        let centre =
+            (((s.theta_deg[i] + end) / 2.0 - s.offset_deg) / 360.0).rem_euclid(1.0) * s.period;
+        let mut t = centre + ((a - centre) / s.period).floor() * s.period;
+        while t < b {
+            if t > a {
+                labels.push((format!("s{i}"), (t * ms, 2.95)));
+            }
+            t += s.period;
+        }
+    }
+    // Exposure lane.
+    let (u, v) = (exp_a.max(a), exp_b.min(b));
+    if v > u {
+        chart.draw_series(std::iter::once(Rectangle::new(
+            [(u * ms, 0.2), (v * ms, 1.0)],
+            RGBColor(90, 90, 90).filled(),
+        )))?;
+    }
+    let font = ("sans-serif", 15).into_font().color(&BLACK);
+    chart.draw_series(
+        labels
+            .into_iter()
+            .map(|(l, p)| Text::new(l, p, font.clone())),
+    )?;
+    let lane = ("sans-serif", 16).into_font().color(&BLACK);
+    for (name, y) in [
+        ("wheel segment (light fraction)", 3.35),
+        ("pattern shown", 2.15),
+        ("exposure", 1.15),
+    ] {
+        chart.draw_series(std::iter::once(Text::new(name, (a * ms, y), lane.clone())))?;
+    }
+    Ok(())
+}
+
+/// The summary under the panels: turns, spoke fraction, weight matrix, warnings.
+fn draw_text(
+    area: &Area,
+    cfg: &TimingConfig,
+    tw: &TimingWeights,
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let style = ("sans-serif", 17).into_font().color(&BLACK);
+    let mut lines = vec![format!(
+        "exposure {} ms = {:.4} turns at {} rev/s, starting {} ms after the index pulse; spot on a spoke {:.3} % of the time",
+        cfg.camera.exposure_s * 1e3,
+        tw.turns_per_exposure,
+        cfg.wheel.rate_hz,
+        cfg.camera.start_s * 1e3,
+        100.0 * tw.spoke_fraction
+    )];
+    lines.push("weights w[segment i][pattern k] (identity = aligned, whole turns):".into());
+    for (i, row) in tw.w.iter().enumerate() {
+        let cells: Vec<String> = row.iter().map(|v| format!("{v:8.5}")).collect();
+        lines.push(format!("   s{i}:  {}", cells.join("   ")));
+    }
+    if tw.warnings.is_empty() {
+        lines.push("no warnings".into());
+    }
+    lines.extend(tw.warnings.iter().map(|w| format!("warning: {w}")));
+    for (m, l) in lines.iter().enumerate() {
+        area.draw(&Text::new(
+            l.clone(),
+            (20, 10 + (m as u32 * LINE) as i32),
+            style.clone(),
+        ))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,40 @@
+//! The report's figures are written and are not blank.
+
+use specmux_report::{ptc::plot_ptc, timeline::timeline_png};
+use specmux_twin::sensor::{default_levels, photon_transfer, Sensor, SensorConfig};
+use specmux_twin::timing::TimingConfig;
+
+fn temp(name: &str) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("specmux-{}-{name}", std::process::id()))
+}
+
+#[test]
+fn photon_transfer_png_is_written() {
+    let cfg = SensorConfig::default();
+    let sensor = Sensor::new(&cfg, 64, 64).unwrap();
+    let r = photon_transfer(&sensor, &default_levels(cfg.full_well_e)).unwrap();
+    let path = temp("ptc.png");
+    plot_ptc(&r, &path).unwrap();
+    let png = image::open(&path).unwrap();
+    assert_eq!((png.width(), png.height()), (900, 600));
+    std::fs::remove_file(&path).unwrap();
+}
+
+#[test]
+fn timeline_png_is_written() {
+    let mut c = TimingConfig::default();
+    c.wheel.spot_diameter_mm = 1.0;
+    c.wheel.spot_radius_mm = 20.0;
+    c.camera.exposure_s = 0.0405;
+    let path = temp("timeline.png");
+    timeline_png(&c, &path).unwrap();
+    let img = image::open(&path).unwrap().to_rgb8();
+    assert_eq!(img.width(), 1500);
+    // Not blank: the panels drew coloured pixels.
+    let coloured = img
+        .pixels()
+        .filter(|p| p.0.iter().max().unwrap() - p.0.iter().min().unwrap() > 60)
+        .count();
+    assert!(coloured > 10_000, "{coloured}");
+    std::fs::remove_file(&path).unwrap();
+}

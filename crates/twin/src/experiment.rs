@@ -1,0 +1,219 @@
+//! The experiment file (TOML): a scene, a rig, the calibration captures and the reconstruction
+//! settings. Each section is the configuration type of the module it configures; this file only
+//! composes them. A section that is absent is a stage that is left out; a key that is absent
+//! takes the 2019 prototype's value.
+
+use crate::captures::CaptureConfig;
+use crate::optics::dmd::DmdConfig;
+use crate::optics::fourier_filter::FourierFilterConfig;
+use crate::optics::imaging::OpticsConfig;
+use crate::optics::psf::LensConfig;
+use crate::optics::wheel::WheelConfig;
+use crate::scene::SceneConfig;
+use crate::sensor::{CameraConfig, SensorConfig};
+use crate::timing::TimingConfig;
+use serde::{Deserialize, Serialize};
+use specmux_core::carriers::{self, Carrier, CarrierConfig};
+use specmux_core::reconstructor::ReconConfig;
+use specmux_core::{Error, Result};
+use std::path::Path;
+
+/// A whole experiment.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Experiment {
+    pub scene: SceneConfig,
+    pub rig: RigConfig,
+    pub calibration: CaptureConfig,
+    pub reconstruct: ReconConfig,
+    /// The file it came from (for messages and relative paths); not part of the TOML.
+    #[serde(skip)]
+    pub file: String,
+}
+
+/// The rig, one field per module of the light path. An absent optional section is a stage that
+/// is not simulated: no `dmd`, `fourier_filter` or `lens` gives ideal grey sinusoids, no `timing`
+/// equal exposure weights, no `sensor` a noiseless, unquantised frame.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RigConfig {
+    pub wheel: WheelConfig,
+    pub camera: CameraConfig,
+    pub carriers: CarrierConfig,
+    pub dmd: Option<DmdConfig>,
+    pub fourier_filter: Option<FourierFilterConfig>,
+    pub lens: Option<LensConfig>,
+    pub timing: Option<TimingConfig>,
+    pub sensor: Option<SensorConfig>,
+}
+
+impl RigConfig {
+    /// The optical stages between the carriers and the sensor.
+    pub fn optics(&self) -> OpticsConfig {
+        OpticsConfig {
+            dmd: self.dmd.clone(),
+            fourier_filter: self.fourier_filter.clone(),
+            lens: self.lens.clone(),
+        }
+    }
+
+    /// True when any optical stage is asked for (the patterns are then simulated, not ideal).
+    pub fn has_optics(&self) -> bool {
+        self.dmd.is_some() || self.fourier_filter.is_some() || self.lens.is_some()
+    }
+}
+
+impl Experiment {
+    /// Parse an experiment from TOML text; errors carry `file` and the line of the fault.
+    pub fn from_toml(text: &str, file: &str) -> Result<Experiment> {
+        let mut e: Experiment = toml::from_str(text).map_err(|err| {
+            let line = err
+                .span()
+                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
+                .unwrap_or(0);
+            Error::Toml {
+                file: format!("{file}:{line}"),
+                msg: err.message().replace('\n', " "),
+            }
+        })?;
+        e.file = file.to_string();
+        e.validate()?;
+        Ok(e)
+    }
+
+    /// Read an experiment file.
+    pub fn load(path: &Path) -> Result<Experiment> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Experiment::from_toml(&text, &path.display().to_string())
+    }
+
+    /// The built-in default experiment (the prototype on the dead-leaves scene).
+    pub fn prototype() -> Experiment {
+        Experiment {
+            file: "<built-in prototype>".into(),
+            ..Default::default()
+        }
+    }
+
+    /// The design carriers on the frame's FFT bin grid, and a note per default carrier snapped.
+    pub fn carriers(&self) -> Result<(Vec<Carrier>, Vec<String>)> {
+        let [w, h] = self.scene.size;
+        self.rig.carriers.on_grid(w, h, &self.file)
+    }
+
+    /// Check every value's range; the error names the key and the value.
+    pub fn validate(&self) -> Result<()> {
+        let f = self.file.as_str();
+        self.scene.validate(f)?;
+        let n = self.rig.wheel.filters.len();
+        if n == 0 || n > 16 {
+            return Err(Error::config(
+                f,
+                "rig.wheel.filters",
+                n,
+                "needs 1 to 16 filters",
+            ));
+        }
+        self.validate_carrier_count(n)?;
+        self.reconstruct.validate(f, n)?;
+        self.calibration.validate(f)?;
+        self.validate_rig(n)?;
+        let [w, h] = self.scene.size;
+        let (design, _) = self.carriers()?;
+        carriers::check_layout(&design, self.reconstruct.crop, w, h, f)
+    }
+
+    fn validate_carrier_count(&self, n: usize) -> Result<()> {
+        let f = self.file.as_str();
+        if let Some(fr) = &self.rig.carriers.frequencies {
+            if fr.len() != n {
+                return Err(Error::config(
+                    f,
+                    "rig.carriers.frequencies",
+                    format!("{} carriers", fr.len()),
+                    &format!("needs one carrier per wheel filter ({n})"),
+                ));
+            }
+        } else if n != carriers::default_layout().len() {
+            return Err(Error::config(
+                f,
+                "rig.wheel.filters",
+                format!("{n} filters"),
+                "the default carrier layout has 6 carriers; give rig.carriers.frequencies",
+            ));
+        }
+        if let Some(p) = &self.rig.carriers.phases_deg {
+            if p.len() != n || p.iter().any(|v| !v.is_finite()) {
+                return Err(Error::config(
+                    f,
+                    "rig.carriers.phases_deg",
+                    format!("{p:?}"),
+                    "needs one finite phase per carrier",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn validate_rig(&self, n: usize) -> Result<()> {
+        let f = self.file.as_str();
+        self.rig.optics().validate(f)?;
+        if let Some(t) = &self.rig.timing {
+            t.validate(f)?;
+            if t.segment_count() != n {
+                return Err(Error::config(
+                    f,
+                    "rig.timing.wheel.segments_deg",
+                    format!("{} segments", t.segment_count()),
+                    &format!("needs one segment per wheel filter ({n})"),
+                ));
+            }
+        }
+        if let Some(s) = &self.rig.sensor {
+            s.validate(f)?;
+            if let Some(t) = &self.rig.timing {
+                if (s.exposure_s - t.camera.exposure_s).abs() > 1e-12 * t.camera.exposure_s {
+                    return Err(Error::config(
+                        f,
+                        "rig.sensor.exposure_s",
+                        s.exposure_s,
+                        &format!(
+                            "differs from rig.timing.camera.exposure_s = {}: one camera, one exposure",
+                            t.camera.exposure_s
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn empty_file_is_the_prototype() {
+        let e = Experiment::from_toml("", "t.toml").unwrap();
+        assert_eq!(e.scene.size, [768, 768]);
+        assert_eq!(e.reconstruct.crop, 0.25);
+        assert_eq!(e.reconstruct.eta, 200.0);
+        assert_eq!(e.carriers().unwrap().0.len(), 6);
+    }
+
+    #[test]
+    fn unknown_keys_and_bad_values_name_the_key() {
+        let e =
+            Experiment::from_toml("[reconstruct]\ncrop = 0.25\netaa = 3\n", "t.toml").unwrap_err();
+        let s = e.to_string();
+        assert!(s.contains("t.toml:3") && s.contains("etaa"), "{s}");
+        let e = Experiment::from_toml("[reconstruct]\neta = -1\n", "t.toml").unwrap_err();
+        assert!(e.to_string().contains("reconstruct.eta"), "{e}");
+        let e = Experiment::from_toml("[scene]\nwavelengths_nm = [400, 700, -10]\n", "t.toml")
+            .unwrap_err();
+        assert!(e.to_string().contains("scene.wavelengths_nm[2]"), "{e}");
+        let e = Experiment::from_toml("[reconstruct]\ncrop = 0.3\n", "t.toml").unwrap_err();
+        assert!(e.to_string().contains("overlap"), "{e}");
+    }
+}

@@ -1,0 +1,469 @@
+//! The 4f relay's output for a pattern's light, exact in wavelength. The mask is fixed in µm, so
+//! frequency bin k passes for the wavelengths of one interval (the ray ξ = f·λ·F/pitch crosses
+//! each convex opening once). Summing over λ then needs no sampling: for coherent light
+//!   Î(q) = Σ_{k, k'} F(k)·F*(k')·∫ w(λ)·[k passes at λ]·[k' passes at λ] dλ,  q = k − k',
+//! and for incoherent light the OTF is the same pair sum with F = 1 and weight w(λ)·λ² (each
+//! wavelength's OTF normalised by its pupil area, which scales as 1/λ²). The integral over the
+//! overlap of two intervals is a difference of the light's cumulative weight at their ends, so
+//! each pair costs a few operations. A second sum with the weight's first moment about the
+//! centroid carries the wavelength dependence of the lens OTF to first order.
+
+use crate::optics::fourier_filter::Aperture;
+use crate::optics::fourier_filter::Illumination;
+use crate::optics::light::PatternLight;
+use rayon::prelude::*;
+use rustfft::num_complex::Complex64;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+
+/// Most frequency bins the openings may pass over the band: the exact sum runs over their
+/// pairs (60 000 bins: 1.8·10⁹ pairs, about 10 s on two cores).
+pub const MAX_PASSED_BINS: usize = 60_000;
+
+/// One wavelength interval (nm) in which a bin passes, with the cumulative pair weights
+/// (weight, first moment) below its lower end and through its upper end.
+#[derive(Clone, Copy, Debug, Default)]
+struct Interval {
+    lo: f64,
+    hi: f64,
+    c_lo: [f64; 2],
+    c_hi: [f64; 2],
+}
+
+/// A frequency bin some wavelength of the light carries through the mask.
+#[derive(Clone, Debug)]
+pub struct PassedBin {
+    /// Bin indices on the (padded) mirror grid: f = (kx/wc, ky/hc) cycles per mirror.
+    pub kx: i64,
+    pub ky: i64,
+    /// The source spectrum there (coherent: the field; incoherent: 1).
+    pub value: Complex64,
+    /// Fraction of the light for which the bin passes.
+    pub weight: f64,
+    ivs: [Interval; 3],
+    n: usize,
+}
+
+/// The pair weights of the light: (weight, first moment about the centroid) of w for coherent
+/// light, of w·λ²/λc² for incoherent light, from the moments ∫ w·(λ − λc)^p.
+fn pair_weights(light: &PatternLight, ill: Illumination, m: [f64; 4]) -> [f64; 2] {
+    match ill {
+        Illumination::Coherent => [m[0], m[1]],
+        Illumination::Incoherent => {
+            let c = light.centroid_nm();
+            let (a, b) = (2.0 / c, 1.0 / (c * c));
+            [m[0] + a * m[1] + b * m[2], m[1] + a * m[2] + b * m[3]]
+        }
+    }
+}
+
+/// Every bin that passes some opening for some wavelength of `light`, sorted by (kx, ky).
+/// `value(kx, ky)` is the source spectrum (used for coherent light; bins where it is zero are
+/// left out). Refuses more than [`MAX_PASSED_BINS`] bins, naming the pinhole radius.
+pub fn passed_bins(
+    aperture: &Aperture,
+    light: &PatternLight,
+    ill: Illumination,
+    (wc, hc): (usize, usize),
+    value: impl Fn(i64, i64) -> Complex64 + Sync,
+) -> Result<Vec<PassedBin>> {
+    let (l1, l2) = light.support_nm();
+    let r = aperture.radius_um;
+    let k = aperture.um_per_cycle_nm;
+    let one = Complex64::new(1.0, 0.0);
+    let mut found: Vec<(i64, i64, (f64, f64), Complex64)> = Vec::new();
+    for (j, o) in aperture.openings.iter().enumerate() {
+        // Bounding box of the opening as the light's wavelengths see it, in bins.
+        let range = |a: f64, b: f64, n: usize| {
+            let (lo, hi) = (a.min(b) - r, a.max(b) + r);
+            let c = [lo / l1, lo / l2, hi / l1, hi / l2].map(|v| v / k * n as f64);
+            let (min, max) = c
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(x, y), &v| (x.min(v), y.max(v)));
+            (min.ceil() as i64, max.floor() as i64)
+        };
+        let (x0, x1) = range(o.a.0, o.b.0, wc);
+        let (y0, y1) = range(o.a.1, o.b.1, hc);
+        let cells = (x1 - x0 + 1).max(0) as f64 * (y1 - y0 + 1).max(0) as f64;
+        if cells > 64.0 * MAX_PASSED_BINS as f64 {
+            return Err(too_many(aperture, cells as usize));
+        }
+        let part: Vec<(i64, i64, (f64, f64), Complex64)> = (x0..=x1)
+            .into_par_iter()
+            .flat_map_iter(|kx| {
+                let value = &value;
+                (y0..=y1).filter_map(move |ky| {
+                    let (fx, fy) = (kx as f64 / wc as f64, ky as f64 / hc as f64);
+                    let (lo, hi) = aperture.pass_interval(j, fx, fy)?;
+                    // A band carries no light outside its support (a line's support is a point,
+                    // which would leave no interval).
+                    let (lo, hi) = match light {
+                        PatternLight::Band(_) => (lo.max(l1), hi.min(l2)),
+                        PatternLight::Line(_) => (lo, hi),
+                    };
+                    if light.moments(lo, hi)[0] <= 0.0 {
+                        return None;
+                    }
+                    let v = match ill {
+                        Illumination::Coherent => value(kx, ky),
+                        Illumination::Incoherent => one,
+                    };
+                    (v != Complex64::default()).then_some((kx, ky, (lo, hi), v))
+                })
+            })
+            .collect();
+        found.extend(part);
+        if found.len() > MAX_PASSED_BINS * aperture.openings.len() {
+            return Err(too_many(aperture, found.len()));
+        }
+    }
+    // One entry per bin: the union of its openings' intervals, as disjoint intervals.
+    found.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2 .0.total_cmp(&b.2 .0)));
+    let mut bins: Vec<PassedBin> = Vec::with_capacity(found.len());
+    for (kx, ky, (lo, hi), value) in found {
+        if let Some(b) = bins.last_mut().filter(|b| (b.kx, b.ky) == (kx, ky)) {
+            let last = &mut b.ivs[b.n - 1];
+            if lo <= last.hi {
+                last.hi = last.hi.max(hi);
+            } else {
+                b.ivs[b.n] = Interval {
+                    lo,
+                    hi,
+                    ..Default::default()
+                };
+                b.n += 1;
+            }
+            continue;
+        }
+        bins.push(PassedBin {
+            kx,
+            ky,
+            value,
+            weight: 0.0,
+            ivs: [
+                Interval {
+                    lo,
+                    hi,
+                    ..Default::default()
+                },
+                Interval::default(),
+                Interval::default(),
+            ],
+            n: 1,
+        });
+    }
+    if bins.len() > MAX_PASSED_BINS {
+        return Err(too_many(aperture, bins.len()));
+    }
+    bins.par_iter_mut().for_each(|b| {
+        for iv in b.ivs[..b.n].iter_mut() {
+            iv.c_lo = pair_weights(light, ill, light.below(iv.lo));
+            iv.c_hi = pair_weights(light, ill, light.through(iv.hi));
+        }
+        b.weight = b.ivs[..b.n]
+            .iter()
+            .map(|iv| light.moments(iv.lo, iv.hi)[0])
+            .sum();
+    });
+    Ok(bins)
+}
+
+fn too_many(aperture: &Aperture, n: usize) -> Error {
+    Error::config(
+        "optics",
+        "rig.fourier_filter.pinhole_radius_um",
+        aperture.radius_um,
+        &format!(
+            "the openings pass {n} frequency bins over the pattern's band, more than {MAX_PASSED_BINS}; \
+             the exact sum over wavelengths runs over their pairs: use smaller openings, fewer mirrors or light = \"line\""
+        ),
+    )
+}
+
+/// ∫ of the pair weights over the wavelengths for which both bins pass.
+#[inline]
+fn overlap(a: &PassedBin, b: &PassedBin) -> [f64; 2] {
+    let mut g = [0.0; 2];
+    for x in &a.ivs[..a.n] {
+        for y in &b.ivs[..b.n] {
+            let (lo, c_lo) = if x.lo >= y.lo {
+                (x.lo, x.c_lo)
+            } else {
+                (y.lo, y.c_lo)
+            };
+            let (hi, c_hi) = if x.hi <= y.hi {
+                (x.hi, x.c_hi)
+            } else {
+                (y.hi, y.c_hi)
+            };
+            if hi >= lo {
+                g[0] += c_hi[0] - c_lo[0];
+                g[1] += c_hi[1] - c_lo[1];
+            }
+        }
+    }
+    g
+}
+
+/// The pair sums Σ value_a·conj(value_b)·∫(pair weights) at q = k_a − k_b for qx ≥ 0 (the
+/// other half follows by Hermitian symmetry): component 0 with the weight, 1 with its first
+/// moment about the centroid.
+pub struct PairSums {
+    qx_max: i64,
+    qy_max: i64,
+    s: [Vec<Complex64>; 2],
+}
+
+impl PairSums {
+    /// Both components at (qx, qy), zero outside the pairs' reach.
+    pub fn at(&self, qx: i64, qy: i64) -> [Complex64; 2] {
+        if !(0..=self.qx_max).contains(&qx) || qy.abs() > self.qy_max {
+            return [Complex64::default(); 2];
+        }
+        let i = (qx * (2 * self.qy_max + 1) + qy + self.qy_max) as usize;
+        [self.s[0][i], self.s[1][i]]
+    }
+
+    /// Largest |qx| and |qy| with a non-zero sum possible.
+    pub fn reach(&self) -> (i64, i64) {
+        (self.qx_max, self.qy_max)
+    }
+}
+
+/// The pair sums of `bins` (sorted by kx, as [`passed_bins`] returns them), parallel over
+/// columns of q so that every column has one writer.
+pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
+    let (kx0, kx1) = match (bins.first(), bins.last()) {
+        (Some(a), Some(b)) => (a.kx, b.kx),
+        _ => (0, 0),
+    };
+    let (ky0, ky1) = bins
+        .iter()
+        .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
+    let (qx_max, qy_max) = (kx1 - kx0, (ky1 - ky0).max(0));
+    let h = (2 * qy_max + 1) as usize;
+    let cols = (qx_max + 1) as usize;
+    let kxs: Vec<i64> = bins.iter().map(|b| b.kx).collect();
+    let per_task = cols.div_ceil(64).max(1);
+    let mut s0 = vec![Complex64::default(); cols * h];
+    let mut s1 = vec![Complex64::default(); cols * h];
+    s0.par_chunks_mut(per_task * h)
+        .zip(s1.par_chunks_mut(per_task * h))
+        .enumerate()
+        .for_each(|(t, (c0, c1))| {
+            let q0 = (t * per_task) as i64;
+            let q1 = q0 + (c0.len() / h) as i64;
+            for a in bins {
+                // b with q0 ≤ kx_a − kx_b < q1.
+                let lo = kxs.partition_point(|&k| k <= a.kx - q1);
+                let hi = kxs.partition_point(|&k| k <= a.kx - q0);
+                for b in &bins[lo..hi] {
+                    let g = overlap(a, b);
+                    if g == [0.0; 2] {
+                        continue;
+                    }
+                    let p = a.value * b.value.conj();
+                    let i = ((a.kx - b.kx - q0) * h as i64 + a.ky - b.ky + qy_max) as usize;
+                    c0[i] += p * g[0];
+                    c1[i] += p * g[1];
+                }
+            }
+        });
+    PairSums {
+        qx_max,
+        qy_max,
+        s: [s0, s1],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::fourier_filter::FourierFilterConfig;
+    use crate::optics::fourier_filter::Light;
+    use crate::optics::fourier_filter::PinholeShape;
+    use specmux_core::spectral::Curve;
+
+    /// A filter whose openings are `r` bins of a `n`-mirror grid at 532 nm.
+    fn filter(r_bins: f64, n: usize, shape: PinholeShape) -> FourierFilterConfig {
+        let f = FourierFilterConfig {
+            light: Light::Line,
+            shape,
+            ..Default::default()
+        };
+        FourierFilterConfig {
+            pinhole_radius_um: r_bins / n as f64 * 532.0 * f.um_per_cycle_nm(13.68),
+            ..f
+        }
+    }
+
+    #[test]
+    fn three_openings_pass_the_carrier_at_two_thirds_incoherently() {
+        // Autocorrelation of three equal disjoint discs at 0, ±ω: 3 overlaps at 0, 2 at ±ω,
+        // 1 at ±2ω, so OTF(ω) = 2/3 and OTF(2ω) = 1/3 exactly when ω is a whole bin shift.
+        let n = 128;
+        let light = PatternLight::Line(532.0);
+        let ap = filter(4.1, n, PinholeShape::Circle).aperture(13.68, 20.0 / 128.0, 0.0, &light);
+        let one = |_, _| Complex64::new(1.0, 0.0);
+        let bins = passed_bins(&ap, &light, Illumination::Incoherent, (n, n), one).unwrap();
+        let s = pair_sums(&bins);
+        let dc = s.at(0, 0)[0].re;
+        assert!((s.at(20, 0)[0].re / dc - 2.0 / 3.0).abs() < 1e-12);
+        assert!((s.at(40, 0)[0].re / dc - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(s.at(30, 0)[0], Complex64::default());
+        // A line has no spread about its centroid.
+        assert_eq!(s.at(20, 0)[1], Complex64::default());
+    }
+
+    #[test]
+    fn a_disc_passes_the_carrier_of_a_narrow_band_only() {
+        // Flat light on 500–600 nm; a disc cut for 550 nm at ω = 0.25 cycles/mirror, radius R µm:
+        // the +ω bin passes while |λ − 550|·0.25·k ≤ R, a window of 2R/(0.25·k) nm.
+        let band = Curve::new("flat", vec![500.0, 600.0], vec![1.0, 1.0]).unwrap();
+        let light = PatternLight::band(&band).unwrap();
+        let f = FourierFilterConfig {
+            pinhole_radius_um: 25.0,
+            shape: PinholeShape::Circle,
+            ..Default::default()
+        };
+        let ap = f.aperture(13.68, 0.25, 0.0, &light);
+        let k = f.um_per_cycle_nm(13.68);
+        let half = 25.0 / (0.25 * k);
+        let (lo, hi) = ap.pass_interval(1, 0.25, 0.0).unwrap();
+        assert!((lo - (550.0 - half)).abs() < 1e-9 && (hi - (550.0 + half)).abs() < 1e-9);
+        let bins = passed_bins(&ap, &light, Illumination::Coherent, (64, 64), |_, _| {
+            Complex64::new(1.0, 0.0)
+        })
+        .unwrap();
+        let carrier = bins.iter().find(|b| (b.kx, b.ky) == (16, 0)).unwrap();
+        assert!((carrier.weight - 2.0 * half / 100.0).abs() < 1e-12);
+        // DC passes at every wavelength; the pair (ω, 0) only where both do.
+        let dc = bins.iter().find(|b| (b.kx, b.ky) == (0, 0)).unwrap();
+        assert!((dc.weight - 1.0).abs() < 1e-12);
+        // Î(ω) = F(ω)F*(0) + F(0)F*(−ω): both pairs pass only in the carrier's window.
+        let minus = bins.iter().find(|b| (b.kx, b.ky) == (-16, 0)).unwrap();
+        let s = pair_sums(&bins);
+        let want = overlap(carrier, dc)[0] + overlap(dc, minus)[0];
+        assert!((want - 4.0 * half / 100.0).abs() < 1e-12);
+        assert!((s.at(16, 0)[0].re - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_streak_passes_the_carrier_of_the_whole_band() {
+        let band = Curve::new("flat", vec![500.0, 600.0], vec![1.0, 1.0]).unwrap();
+        let light = PatternLight::band(&band).unwrap();
+        let f = FourierFilterConfig::default();
+        let ap = f.aperture(13.68, 0.25, 0.125, &light);
+        let bins = passed_bins(&ap, &light, Illumination::Coherent, (64, 64), |_, _| {
+            Complex64::new(1.0, 0.0)
+        })
+        .unwrap();
+        let carrier = bins.iter().find(|b| (b.kx, b.ky) == (16, 8)).unwrap();
+        assert!((carrier.weight - 1.0).abs() < 1e-12, "{}", carrier.weight);
+        let minus = bins.iter().find(|b| (b.kx, b.ky) == (-16, -8)).unwrap();
+        assert!((minus.weight - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_band_sum_is_the_limit_of_line_sums() {
+        // Exactness in λ: Σ_j w_j·(pair sums of the line λ_j) on a fine grid of lines converges
+        // to the band's pair sums, for both illuminations (incoherent lines weighted by λ²/λc²,
+        // each line's OTF being normalised by its area).
+        let band = Curve::new("ramp", vec![480.0, 620.0], vec![1.0, 3.0]).unwrap();
+        let light = PatternLight::band(&band).unwrap();
+        let lc = light.centroid_nm();
+        let f = FourierFilterConfig {
+            shape: PinholeShape::Circle,
+            pinhole_radius_um: 40.0,
+            ..Default::default()
+        };
+        let (n, fx, fy) = (48, 0.25, 0.125);
+        let value = |kx: i64, ky: i64| Complex64::new(1.0 + 0.1 * kx as f64, 0.05 * ky as f64);
+        for ill in [Illumination::Coherent, Illumination::Incoherent] {
+            let ap = f.aperture(13.68, fx, fy, &light);
+            let exact = pair_sums(&passed_bins(&ap, &light, ill, (n, n), value).unwrap());
+            let steps = 4000;
+            let mut sum = [Complex64::default(); 3];
+            for i in 0..steps {
+                let (a, b) = (
+                    480.0 + 140.0 * i as f64 / steps as f64,
+                    480.0 + 140.0 * (i + 1) as f64 / steps as f64,
+                );
+                let w = light.moments(a, b)[0];
+                let l = 0.5 * (a + b);
+                let w = match ill {
+                    Illumination::Coherent => w,
+                    Illumination::Incoherent => w * l * l / (lc * lc),
+                };
+                let line = PatternLight::Line(l);
+                let s = pair_sums(&passed_bins(&ap, &line, ill, (n, n), value).unwrap());
+                for (acc, (qx, qy)) in sum.iter_mut().zip([(0, 0), (12, 6), (24, 12)]) {
+                    *acc += s.at(qx, qy)[0] * w;
+                }
+            }
+            for (acc, (qx, qy)) in sum.iter().zip([(0, 0), (12, 6), (24, 12)]) {
+                let e = exact.at(qx, qy)[0];
+                assert!(
+                    (e - acc).norm() <= 2e-3 * e.norm().max(1e-9),
+                    "{ill:?} ({qx}, {qy}): {e} vs {acc}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn pass_intervals_agree_with_the_mask_at_every_wavelength() {
+        // Brute force: the mask at λ contains f exactly when λ lies in the bin's interval.
+        let band = Curve::new("b", vec![420.0, 680.0], vec![1.0, 2.0]).unwrap();
+        let light = PatternLight::band(&band).unwrap();
+        for shape in [
+            PinholeShape::Circle,
+            PinholeShape::Square,
+            PinholeShape::Streak,
+        ] {
+            let f = FourierFilterConfig {
+                shape,
+                pinhole_radius_um: 60.0,
+                ..Default::default()
+            };
+            let ap = f.aperture(13.68, 0.3, -0.2, &light);
+            for (i, (fx, fy)) in [
+                (0.3, -0.2),
+                (0.31, -0.19),
+                (0.24, -0.16),
+                (0.4, -0.27),
+                (0.005, 0.01),
+                (-0.3, 0.2),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let ivs: Vec<(f64, f64)> =
+                    (0..3).filter_map(|j| ap.pass_interval(j, fx, fy)).collect();
+                for l in (300..=900).map(|l| l as f64 + 0.37) {
+                    let inside = ap.at_wavelength(l).at(fx, fy) > 0.0;
+                    let within = ivs.iter().any(|&(lo, hi)| lo <= l && l <= hi);
+                    assert_eq!(inside, within, "{shape:?} point {i} at {l} nm: {ivs:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn too_many_bins_are_refused_naming_the_radius() {
+        let light = PatternLight::Line(532.0);
+        let f = filter(400.0, 1024, PinholeShape::Circle);
+        let ap = f.aperture(13.68, 0.25, 0.0, &light);
+        let e = passed_bins(
+            &ap,
+            &light,
+            Illumination::Incoherent,
+            (1024, 1024),
+            |_, _| Complex64::new(1.0, 0.0),
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(e.contains("rig.fourier_filter.pinhole_radius_um"), "{e}");
+    }
+}

@@ -1,0 +1,195 @@
+//! The rig as an experiment resolves it: curves loaded, the projection cube → channels and the
+//! spectral basis computed. The forward model, the reconstruction and the controller share it.
+
+use crate::experiment::Experiment;
+use crate::optics::light::PatternLight;
+use crate::optics::wheel::ColorWheel;
+use crate::optics::wheel::Projection;
+use crate::scene::Materials;
+use crate::scene::Quantity;
+use crate::timing;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+use specmux_core::reconstructor::Design;
+use specmux_core::spectral::Basis;
+use specmux_core::spectral::Curve;
+use specmux_core::spectral::Grid;
+use specmux_core::spectral::Library;
+use specmux_core::Carrier;
+
+/// Everything the experiment's rig resolves to: curves loaded, projection and basis computed.
+#[derive(Clone, Debug)]
+pub struct Rig {
+    pub grid: Grid,
+    pub wheel: ColorWheel,
+    pub qe: Curve,
+    /// The illuminant of a reflectance scene; None for a radiance scene.
+    pub illuminant: Option<Curve>,
+    /// The light that lit a radiance scene (`scene.illuminant`, None if ""): lights the prior.
+    pub radiance_light: Option<Curve>,
+    /// x = W r: cube bands → wheel channels, normalised (see `ColorWheel::projection`).
+    pub projection: Projection,
+    pub carriers: Vec<Carrier>,
+    pub basis: Basis,
+    pub width: usize,
+    pub height: usize,
+    /// w_ik of one exposure as the programmed timing predicts (`[rig.timing]`), None without.
+    pub exposure_weights: Option<Vec<Vec<f64>>>,
+    /// What the operator should know about the rig as built (snapped carriers, timing).
+    pub warnings: Vec<String>,
+}
+
+impl Rig {
+    /// Load the rig's curves from the library and precompute the projection and the basis.
+    pub fn build(exp: &Experiment, lib: &Library, materials: &Materials) -> Result<Rig> {
+        let grid = exp.scene.grid(&exp.file)?;
+        let (carriers, mut warnings) = exp.carriers()?;
+        let exposure_weights = match &exp.rig.timing {
+            Some(t) => {
+                let tw = timing::weights(t)?;
+                warnings.extend(tw.warnings);
+                Some(tw.w)
+            }
+            None => None,
+        };
+        let named = |key: &str, name: &str| {
+            lib.curve(name)
+                .map_err(|e| Error::config(&exp.file, key, format!("\"{name}\""), &e.to_string()))
+        };
+        let filters = exp
+            .rig
+            .wheel
+            .filters
+            .iter()
+            .enumerate()
+            .map(|(i, n)| named(&format!("rig.wheel.filters[{i}]"), n))
+            .collect::<Result<Vec<_>>>()?;
+        let qe = named("rig.camera.qe", &exp.rig.camera.qe)?;
+        let illuminant = match exp.scene.quantity {
+            Quantity::Reflectance => Some(named("scene.illuminant", &exp.scene.illuminant)?),
+            Quantity::Radiance => None,
+        };
+        let radiance_light = match exp.scene.quantity {
+            Quantity::Radiance if !exp.scene.illuminant.is_empty() => {
+                let l = named("scene.illuminant", &exp.scene.illuminant)?;
+                if let Some(wl) = grid.wavelengths().into_iter().find(|&w| l.eval(w) <= 0.0) {
+                    let why = format!("must be positive on every band; it is not at {wl} nm");
+                    return Err(Error::config(&exp.file, "scene.illuminant", &l.name, &why));
+                }
+                Some(l)
+            }
+            _ => None,
+        };
+        let wheel = ColorWheel { filters };
+        let projection = wheel.projection(&grid, illuminant.as_ref(), &qe)?;
+        let basis = Basis::train(&materials.train, &grid, exp.reconstruct.basis)?;
+        Ok(Rig {
+            grid,
+            wheel,
+            qe,
+            illuminant,
+            radiance_light,
+            projection,
+            carriers,
+            basis,
+            width: exp.scene.size[0],
+            height: exp.scene.size[1],
+            exposure_weights,
+            warnings,
+        })
+    }
+
+    /// What the reconstruction core knows of this rig before any frame: the design.
+    pub fn design(&self) -> Design {
+        Design {
+            width: self.width,
+            height: self.height,
+            carriers: self.carriers.clone(),
+            system: self.system_matrix(),
+            basis: self.basis.vectors.clone(),
+            output_gains: self.light_gains(),
+            band_step_nm: self.grid.step_nm,
+            white: self.white(),
+            exposure_weights: self.exposure_weights.clone(),
+        }
+    }
+
+    /// x_i of a white reflector: the projection's row sums.
+    pub fn white(&self) -> Vec<f64> {
+        self.projection.w.row_iter().map(|r| r.sum()).collect()
+    }
+
+    /// The light of each wheel channel as the camera weighs it on a flat reflector, T_i·L·QE,
+    /// sampled every nanometre (or finer) over the cube's wavelengths; L is the radiance scene's
+    /// light, flat without one. Pattern i is formed by this light (optics/light.rs).
+    pub fn pattern_spectra(&self) -> Result<Vec<Curve>> {
+        let (lo, hi) = (self.grid.start_nm, self.grid.end_nm());
+        let n = (hi - lo).ceil().max(1.0) as usize + 1;
+        let wl: Vec<f64> = (0..n)
+            .map(|k| lo + (hi - lo) * k as f64 / (n - 1) as f64)
+            .collect();
+        let light = self.illuminant.as_ref().or(self.radiance_light.as_ref());
+        self.wheel
+            .filters
+            .iter()
+            .map(|t| {
+                let v = wl
+                    .iter()
+                    .map(|&l| t.eval(l) * self.qe.eval(l) * light.map_or(1.0, |c| c.eval(l)))
+                    .collect();
+                Curve::new(format!("{} light", t.name), wl.clone(), v)
+            })
+            .collect()
+    }
+
+    /// The light of each pattern under the experiment's optics (`OpticsConfig::pattern_lights`);
+    /// a band that passes no light on the cube's wavelengths is refused by its segment's key (a
+    /// laser line does not need the segment's light to form its pattern).
+    pub fn pattern_lights(&self, exp: &Experiment) -> Result<Vec<PatternLight>> {
+        let spectra = self.pattern_spectra()?;
+        // A band that carries no power cannot form a pattern: name the segment's key.
+        exp.rig.optics().pattern_lights(&spectra).map_err(|e| {
+            match spectra.iter().position(|c| c.values().iter().all(|&v| v <= 0.0)) {
+                Some(i) => Error::config(
+                    &exp.file,
+                    &format!("rig.wheel.filters[{i}]"),
+                    format!("\"{}\"", self.wheel.filters[i].name),
+                    &format!(
+                        "passes no light on {}–{} nm with this camera and light, so the pattern it forms is dark",
+                        self.grid.start_nm,
+                        self.grid.end_nm()
+                    ),
+                ),
+                None => e,
+            }
+        })
+    }
+
+    /// For a radiance scene lit by L: L at the band centres divided by its mean over the bands
+    /// (unit mean, so that η weighs the reflectance curvature as in a reflectance scene); None
+    /// otherwise. The reconstruction solves for the reflectance-like Bα and returns diag(L̃)·Bα.
+    pub fn light_gains(&self) -> Option<Vec<f64>> {
+        let light = self.radiance_light.as_ref()?;
+        let l = light.sample(&self.grid);
+        let mean = l.iter().sum::<f64>() / l.len() as f64;
+        Some(l.iter().map(|v| v / mean).collect())
+    }
+
+    /// The basis as the cube sees it (bands × J): B for a reflectance scene; for a radiance
+    /// scene lit by L, diag(L̃)·B — the reflectance prior lit by the scene's light (docs/mitsuba.md).
+    pub fn prior(&self) -> nalgebra::DMatrix<f64> {
+        let mut b = self.basis.vectors.clone();
+        if let Some(g) = self.light_gains() {
+            for (mut row, g) in b.row_iter_mut().zip(g) {
+                row *= g;
+            }
+        }
+        b
+    }
+
+    /// F_ij = Σ_b W_ib P_bj with P = `prior()`: ∫ T_i L QE b_j dλ, exact for a basis piecewise
+    /// linear on the grid.
+    pub fn system_matrix(&self) -> nalgebra::DMatrix<f64> {
+        &self.projection.w * self.prior()
+    }
+}

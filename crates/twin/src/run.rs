@@ -1,0 +1,329 @@
+//! Runs an experiment end to end — forward model, reconstruction, error against the truth — and
+//! gathers every figure with its wall time into one report.
+
+use crate::captures;
+use crate::experiment::Experiment;
+use crate::forward::{Pipeline, Simulated, StageTime};
+use crate::rig::Rig;
+use crate::scene::Materials;
+use crate::sensor::Sensor;
+use serde::Serialize;
+use specmux_core::calibration::{Calibration, MeasuredCarrier};
+use specmux_core::crosstalk::{self, ErrorBudget};
+use specmux_core::demux::{Demux, SUPER_GAUSSIAN_ORDER};
+use specmux_core::metrics::{self, Metrics};
+use specmux_core::reconstructor::{Reconstruction, Reconstructor};
+use specmux_core::spectral::basis::BasisFit;
+use specmux_core::spectral::Library;
+use specmux_core::unmix::UnmixStats;
+use specmux_core::{Cube, Result};
+use std::time::Instant;
+
+/// One row of the result table: an estimate against its truth, and what it cost.
+#[derive(Clone, Debug, Serialize)]
+pub struct ResultRow {
+    pub stage: String,
+    pub against: String,
+    pub psnr_db: f64,
+    pub ssim: f64,
+    pub nrmse: f64,
+    pub sam_deg: f64,
+    pub seconds: f64,
+}
+
+/// Demultiplexing of one channel against the best its crop window could do alone.
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelRow {
+    pub channel: usize,
+    pub filter: String,
+    pub carrier: [f64; 2],
+    pub psnr_db: f64,
+    pub ssim: f64,
+    pub bound_psnr_db: f64,
+    pub bound_ssim: f64,
+    /// |ĝ|/½: the carrier amplitude the demultiplexer divides by, against the ideal pattern's
+    /// (1 for ideal sinusoids; measured on the imaged patterns otherwise).
+    pub carrier_gain: f64,
+}
+
+/// What the calibration measured, and from what: "captures" (the frames a rig records) or
+/// "oracle" (the simulator's exact patterns; figures from it are not a rig's).
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrationReport {
+    pub source: String,
+    pub carriers: Vec<MeasuredCarrier>,
+}
+
+impl CalibrationReport {
+    fn new(recon: &Reconstructor) -> CalibrationReport {
+        CalibrationReport {
+            source: recon.calibration.source.clone(),
+            carriers: recon.calibration.carriers.clone(),
+        }
+    }
+}
+
+/// How well the spectral basis represents the training and the held-out reflectances.
+#[derive(Clone, Debug, Serialize)]
+pub struct BasisReport {
+    pub vectors: usize,
+    pub train: BasisFit,
+    pub held_out: BasisFit,
+}
+
+/// Everything an experiment run measured.
+#[derive(Clone, Debug, Serialize)]
+pub struct RunReport {
+    pub experiment: String,
+    pub scene: String,
+    pub size: [usize; 2],
+    pub bands: usize,
+    pub forward_stages: Vec<StageTime>,
+    pub results: Vec<ResultRow>,
+    pub channels: Vec<ChannelRow>,
+    pub basis: BasisReport,
+    pub calibration: CalibrationReport,
+    pub unmix: UnmixStats,
+    /// Where each channel's demultiplexing error comes from (ideal patterns only).
+    pub error_budget: Option<Vec<ErrorBudget>>,
+    /// What the rig operator should know (timing: exposure not whole turns, rates, spokes).
+    pub warnings: Vec<String>,
+    /// Building the reconstructor: windows, unmixer, GAP, calibration frames.
+    pub setup_seconds: f64,
+    /// Per frame: calibration, demultiplexing, crosstalk, de-aliasing and unmixing.
+    pub reconstruction_seconds: f64,
+    pub total_seconds: f64,
+}
+
+/// The arrays of a run, for writing files.
+pub struct RunData {
+    pub truth: Cube,
+    pub channels: Cube,
+    pub frame: Cube,
+    pub xhat: Cube,
+    pub cube: Cube,
+}
+
+fn row(stage: &str, against: &str, m: &Metrics, seconds: f64) -> ResultRow {
+    ResultRow {
+        stage: stage.into(),
+        against: against.into(),
+        psnr_db: m.psnr_db,
+        ssim: m.ssim,
+        nrmse: m.nrmse,
+        sam_deg: m.sam_deg,
+        seconds,
+    }
+}
+
+/// The reconstructor the core builds for this rig from its design and the calibration frames
+/// the twin captures (or the oracle, when `[calibration] source = "oracle"`).
+pub fn reconstructor(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Reconstructor> {
+    let cal = calibration(exp, rig, sim)?;
+    Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)
+}
+
+/// The core's calibration from the frames the twin captures for this rig.
+pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
+    let sensor = match &exp.rig.sensor {
+        Some(c) => Some(Sensor::new(c, rig.width, rig.height)?),
+        None => None,
+    };
+    let frames = captures::calibration_frames(&exp.calibration, sim, sensor.as_ref())?;
+    Calibration::from_frames(&rig.carriers, &frames, exp.calibration.search_bins)
+}
+
+/// Simulate the experiment's frame, reconstruct it and compare every stage with the truth.
+pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
+    let t_all = Instant::now();
+    let materials = Materials::load(lib)?;
+    let rig = Rig::build(exp, lib, &materials)?;
+    let pipeline = Pipeline::build(exp, &rig, &materials)?;
+    let (sim, forward_stages) = pipeline.run()?;
+    let t = Instant::now();
+    let recon = reconstructor(exp, &rig, &sim)?;
+    let t_setup = t.elapsed().as_secs_f64();
+    let out = recon.run(&sim.frame, Some(&sim.exposed))?;
+    let (results, m_x, m_bound) = result_rows(exp, &recon, &sim, &out)?;
+    let error_budget = error_budget(exp, &rig, &sim.channels)?;
+    let basis = BasisReport {
+        vectors: rig.basis.len(),
+        train: rig.basis.fit(&materials.train)?,
+        held_out: rig.basis.fit(&materials.held_out)?,
+    };
+    let [t_demux, t_gap, t_unmix] = out.seconds;
+    let report = RunReport {
+        experiment: exp.file.clone(),
+        scene: sim.scene.name.clone(),
+        size: [sim.frame.width, sim.frame.height],
+        bands: sim.scene.grid.count,
+        forward_stages,
+        results,
+        channels: channel_rows(&rig, &recon, &m_x, &m_bound),
+        calibration: CalibrationReport::new(&recon),
+        basis,
+        unmix: out.unmix,
+        error_budget,
+        warnings: rig.warnings.clone(),
+        setup_seconds: t_setup,
+        reconstruction_seconds: t_demux + t_gap + t_unmix,
+        total_seconds: t_all.elapsed().as_secs_f64(),
+    };
+    let data = RunData {
+        truth: sim.scene.cube,
+        channels: sim.channels,
+        frame: sim.frame,
+        xhat: out.xhat,
+        cube: out.cube,
+    };
+    Ok((report, data))
+}
+
+/// The result table: demultiplexed and de-aliased channels, the crop bound, the cube and the
+/// spectral limit, each against its truth; also the channel metrics and the bound's.
+fn result_rows(
+    exp: &Experiment,
+    recon: &Reconstructor,
+    sim: &Simulated,
+    out: &Reconstruction,
+) -> Result<(Vec<ResultRow>, Metrics, Metrics)> {
+    let [t_demux, t_gap, t_unmix] = out.seconds;
+    let t = Instant::now();
+    let bound = recon.demux.crop_bound(&sim.channels);
+    let t_bound = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (ideal_cube, _) = recon.unmix(&sim.channels)?;
+    let t_ideal = t.elapsed().as_secs_f64();
+    let truth = &sim.scene.cube;
+    let m_x = metrics::compare(&sim.channels, &out.xhat)?;
+    let m_gap = metrics::compare(&sim.channels, &out.xgap)?;
+    let m_bound = metrics::compare(&sim.channels, &bound)?;
+    let gap = format!(
+        "gap ({:?}, {} it)",
+        exp.reconstruct.gap.method, out.gap.iterations
+    );
+    let rows = vec![
+        row("demultiplex", "x (true channels)", &m_x, t_demux),
+        row(&gap, "x (true channels)", &m_gap, t_gap),
+        row(
+            "crop bound",
+            "x (window on each channel alone)",
+            &m_bound,
+            t_bound,
+        ),
+        row(
+            "unmix",
+            "r (true cube)",
+            &metrics::compare(truth, &out.cube)?,
+            t_unmix,
+        ),
+        row(
+            "unmix of true x",
+            "r (spectral limit)",
+            &metrics::compare(truth, &ideal_cube)?,
+            t_ideal,
+        ),
+    ];
+    Ok((rows, m_x, m_bound))
+}
+
+fn channel_rows(
+    rig: &Rig,
+    recon: &Reconstructor,
+    m_x: &Metrics,
+    m_bound: &Metrics,
+) -> Vec<ChannelRow> {
+    (0..rig.carriers.len())
+        .map(|i| ChannelRow {
+            channel: i,
+            filter: rig.wheel.filters[i].name.clone(),
+            carrier: [rig.carriers[i].fx, rig.carriers[i].fy],
+            psnr_db: m_x.psnr_per_plane[i],
+            ssim: m_x.ssim_per_plane[i],
+            bound_psnr_db: m_bound.psnr_per_plane[i],
+            bound_ssim: m_bound.ssim_per_plane[i],
+            carrier_gain: recon.demux.gains[i].norm() / (0.5 * recon.exposed_white[i]),
+        })
+        .collect()
+}
+
+/// The leaks of the ideal sinusoids into each channel's window; None with simulated optics or
+/// timing, where it would describe another frame than the one reconstructed.
+fn error_budget(exp: &Experiment, rig: &Rig, channels: &Cube) -> Result<Option<Vec<ErrorBudget>>> {
+    if exp.rig.has_optics() || exp.rig.timing.is_some() {
+        return Ok(None);
+    }
+    let r = &exp.reconstruct;
+    let ideal = Demux::new(rig.width, rig.height, &rig.carriers, r.crop)
+        .with_window(r.window, SUPER_GAUSSIAN_ORDER)?;
+    Ok(Some(crosstalk::budget(&ideal, channels, &rig.carriers)?))
+}
+
+impl RunReport {
+    /// The result table as fixed-width text.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{:<18} {:<34} {:>9} {:>7} {:>8} {:>8} {:>10}\n",
+            "stage", "against", "PSNR dB", "SSIM", "NRMSE", "SAM °", "seconds"
+        );
+        for r in &self.results {
+            s += &format!(
+                "{:<18} {:<34} {:>9.2} {:>7.4} {:>8.4} {:>8.2} {:>10.4}\n",
+                r.stage, r.against, r.psnr_db, r.ssim, r.nrmse, r.sam_deg, r.seconds
+            );
+        }
+        s += &format!(
+            "\n{:<8} {:<16} {:>12} {:>10} {:>8} {:>10} {:>8} {:>7}\n",
+            "channel", "filter", "carrier", "PSNR dB", "SSIM", "bound dB", "bound", "gain"
+        );
+        for c in &self.channels {
+            s += &format!(
+                "{:<8} {:<16} {:>12} {:>10.2} {:>8.4} {:>10.2} {:>8.4} {:>7.3}\n",
+                c.channel,
+                c.filter,
+                format!("({},{})", c.carrier[0], c.carrier[1]),
+                c.psnr_db,
+                c.ssim,
+                c.bound_psnr_db,
+                c.bound_ssim,
+                c.carrier_gain
+            );
+        }
+        if let Some(b) = &self.error_budget {
+            s += "\nerror budget of demultiplexing, dB (higher = smaller leak): DC term, then each carrier term (own = mirror)\n";
+            for e in b {
+                let parts: Vec<String> = e.carrier_db.iter().map(|v| format!("{v:6.1}")).collect();
+                s += &format!(
+                    "ch{} DC {:6.1} | {} | worst: {}\n",
+                    e.channel,
+                    e.dc_db,
+                    parts.join(" "),
+                    e.worst
+                );
+            }
+        }
+        for w in &self.warnings {
+            s += &format!("\nwarning: {w}");
+        }
+        s += "\nforward stages: ";
+        s += &self
+            .forward_stages
+            .iter()
+            .map(|t| format!("{} {:.3}s", t.stage, t.seconds))
+            .collect::<Vec<_>>()
+            .join(", ");
+        s += &format!(
+            "\nbasis J={}: held-out RMSE {:.4} (train {:.4}), energy {:.5}\nunmix: {} of {} pixels hit the non-negativity bound\nreconstructor set-up {:.4}s, reconstruction {:.4}s, total {:.2}s\n",
+            self.basis.vectors,
+            self.basis.held_out.rmse,
+            self.basis.train.rmse,
+            self.basis.held_out.energy_captured,
+            self.unmix.constrained_pixels,
+            self.unmix.pixels,
+            self.setup_seconds,
+            self.reconstruction_seconds,
+            self.total_seconds
+        );
+        s
+    }
+}

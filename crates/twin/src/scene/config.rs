@@ -1,0 +1,125 @@
+//! The scene's configuration (`[scene]`): what is imaged, its size and its band grid.
+
+use serde::{Deserialize, Serialize};
+use specmux_core::spectral::Grid;
+use specmux_core::{Error, Result};
+use std::path::{Path, PathBuf};
+
+/// What is imaged.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneConfig {
+    /// `dead-leaves`, `shaded-objects`, `exr:<path>` (a reflectance or radiance cube), or
+    /// `mitsuba:<prefix>` (a Mitsuba render `<prefix>_truth.exr`, radiance; scene/mitsuba.rs).
+    pub source: String,
+    /// Width and height in pixels (procedural scenes; the prototype's 768 × 768).
+    pub size: [usize; 2],
+    /// Illuminant curve under spectra/ for a reflectance scene; for a radiance scene the light
+    /// that lit it (the basis is lit by it, rig.rs), `""` for none.
+    pub illuminant: String,
+    /// `reflectance` (lit by `illuminant`) or `radiance` (used as it is).
+    pub quantity: Quantity,
+    /// Seed of the scene's random draws.
+    pub seed: u64,
+    /// Band grid: first and last band centre and the step, in nm (the CAVE grid 400–700/10).
+    pub wavelengths_nm: [f64; 3],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Quantity {
+    Reflectance,
+    Radiance,
+}
+
+impl Default for SceneConfig {
+    fn default() -> Self {
+        SceneConfig {
+            source: "dead-leaves".into(),
+            size: [768, 768],
+            illuminant: "illuminants/D65".into(),
+            quantity: Quantity::Reflectance,
+            seed: 7,
+            wavelengths_nm: [400.0, 700.0, 10.0],
+        }
+    }
+}
+
+impl SceneConfig {
+    /// The band grid of `wavelengths_nm`; `file` names the experiment in errors.
+    pub fn grid(&self, file: &str) -> Result<Grid> {
+        let [lo, hi, step] = self.wavelengths_nm;
+        let count = ((hi - lo) / step).round() as usize + 1;
+        if ((count - 1) as f64 * step + lo - hi).abs() > 1e-6 * step {
+            return Err(Error::config(
+                file,
+                "scene.wavelengths_nm",
+                format!("[{lo}, {hi}, {step}]"),
+                "the step must divide last − first",
+            ));
+        }
+        Grid::new(lo, step, count).map_err(|e| {
+            Error::config(
+                file,
+                "scene.wavelengths_nm",
+                format!("[{lo}, {hi}, {step}]"),
+                &e.to_string(),
+            )
+        })
+    }
+
+    /// Path of an `exr:` scene source, relative to the experiment file's folder.
+    pub fn path(&self, rel: &str, file: &str) -> PathBuf {
+        let p = Path::new(rel);
+        if p.is_absolute() {
+            return p.to_path_buf();
+        }
+        Path::new(file)
+            .parent()
+            .map(|d| d.join(p))
+            .unwrap_or_else(|| p.to_path_buf())
+    }
+
+    /// Check the source, size and band grid; the error names the key and the value.
+    pub fn validate(&self, f: &str) -> Result<()> {
+        let known = ["dead-leaves", "shaded-objects"];
+        let prefixed = ["exr:", super::mitsuba::PREFIX].map(|p| self.source.starts_with(p));
+        if !known.contains(&self.source.as_str()) && !prefixed.contains(&true) {
+            return Err(Error::config(
+                f,
+                "scene.source",
+                format!("\"{}\"", self.source),
+                "expected \"dead-leaves\", \"shaded-objects\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
+            ));
+        }
+        super::mitsuba::check(self, f)?;
+        for (k, &n) in self.size.iter().enumerate() {
+            if !(16..=8192).contains(&n) {
+                return Err(Error::config(
+                    f,
+                    &format!("scene.size[{k}]"),
+                    n,
+                    "must be 16 to 8192 pixels",
+                ));
+            }
+        }
+        let [lo, hi, step] = self.wavelengths_nm;
+        if !(step.is_finite() && step > 0.0) {
+            return Err(Error::config(
+                f,
+                "scene.wavelengths_nm[2]",
+                step,
+                "the step must be positive",
+            ));
+        }
+        if !(lo.is_finite() && lo > 0.0 && hi.is_finite() && hi > lo) {
+            return Err(Error::config(
+                f,
+                "scene.wavelengths_nm",
+                format!("[{lo}, {hi}, {step}]"),
+                "needs 0 < first < last",
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,141 @@
+//! Scenes: procedural (dead leaves, shaded objects), EXR cubes and Mitsuba renders, and the
+//! reflectance library split into the basis's training half and the scenes' held-out half.
+
+pub mod config;
+pub mod dead_leaves;
+pub mod mitsuba;
+pub mod shaded;
+
+pub use config::{Quantity, SceneConfig};
+
+use rayon::prelude::*;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+use specmux_core::spectral::Curve;
+use specmux_core::spectral::Grid;
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+
+/// A spectral cube on a wavelength grid: reflectance (lit later by the experiment's illuminant)
+/// or radiance.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub name: String,
+    pub cube: Cube,
+    pub grid: Grid,
+    pub quantity: Quantity,
+}
+
+/// The measured reflectance library split in two disjoint halves (alternate samples): one trains
+/// the spectral basis, the other paints the scenes, so that a scene never contains the very
+/// spectra the basis was fitted to.
+#[derive(Clone, Debug)]
+pub struct Materials {
+    pub train: Vec<Curve>,
+    pub held_out: Vec<Curve>,
+}
+
+impl Materials {
+    /// Every curve under `spectra/reflectance/`, split even/odd.
+    pub fn load(lib: &Library) -> Result<Materials> {
+        let all = lib.folder("reflectance")?;
+        let (mut train, mut held_out) = (Vec::new(), Vec::new());
+        for (k, c) in all.into_iter().enumerate() {
+            if k % 2 == 0 {
+                train.push(c)
+            } else {
+                held_out.push(c)
+            }
+        }
+        Ok(Materials { train, held_out })
+    }
+}
+
+/// The experiment's band grid.
+
+/// Build the experiment's scene: a procedural one from held-out materials, or an EXR cube.
+pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Scene> {
+    let grid = cfg.grid(file)?;
+    let [w, h] = cfg.size;
+    let spectra: Vec<Vec<f32>> = materials
+        .held_out
+        .iter()
+        .map(|c| c.sample(&grid).into_iter().map(|v| v as f32).collect())
+        .collect();
+    let src = cfg.source.as_str();
+    let cube = match src {
+        "dead-leaves" => {
+            let labels = dead_leaves::labels(w, h, spectra.len(), cfg.seed);
+            paint(w, h, grid.count, |b, p| spectra[labels[p] as usize][b])
+        }
+        "shaded-objects" => {
+            // The background is black velvet: a flat 2 % reflectance.
+            let s = shaded::spheres(w, h, spectra.len(), cfg.seed);
+            let refl = |m: Option<u32>, b: usize| m.map_or(0.02, |m| spectra[m as usize][b]);
+            paint(w, h, grid.count, |b, p| {
+                let (m1, w1, m2, w2) = s.layers[p];
+                w1 * refl(m1, b) + w2 * refl(m2, b)
+            })
+        }
+        s if s.starts_with(mitsuba::PREFIX) => return mitsuba::scene(cfg, file, &grid),
+        _ => return exr_scene(cfg, file, &grid),
+    };
+    Ok(Scene {
+        name: src.to_string(),
+        cube,
+        grid,
+        quantity: cfg.quantity,
+    })
+}
+
+/// A cube whose plane b, pixel p is `value(b, p)`, filled in parallel over planes.
+fn paint(w: usize, h: usize, bands: usize, value: impl Fn(usize, usize) -> f32 + Sync) -> Cube {
+    let mut cube = Cube::zeros(w, h, bands);
+    cube.data
+        .par_chunks_mut(w * h)
+        .enumerate()
+        .for_each(|(b, plane)| {
+            plane
+                .iter_mut()
+                .enumerate()
+                .for_each(|(p, v)| *v = value(b, p))
+        });
+    cube
+}
+
+/// A cube read from EXR; its channel names must carry the grid's wavelengths.
+fn exr_scene(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Scene> {
+    let rel = cfg.source.trim_start_matches("exr:");
+    let path = cfg.path(rel, file);
+    let (cube, names) = specmux_io::exr::read(&path)?;
+    let err = |msg: String| Error::Exr {
+        path: path.clone(),
+        msg,
+    };
+    if cube.planes != grid.count {
+        return Err(err(format!(
+            "{} channels, the experiment's grid scene.wavelengths_nm has {} bands",
+            cube.planes, grid.count
+        )));
+    }
+    for (k, n) in names.iter().enumerate() {
+        match specmux_io::exr::parse_band_name(n) {
+            Some(wl) if (wl - grid.wavelength(k)).abs() < 1e-3 => {}
+            _ => {
+                return Err(err(format!(
+                    "channel `{n}` should be band {} nm",
+                    grid.wavelength(k)
+                )))
+            }
+        }
+    }
+    if !cube.all_finite() {
+        return Err(err("contains NaN or infinite values".into()));
+    }
+    Ok(Scene {
+        name: rel.to_string(),
+        cube,
+        grid: *grid,
+        quantity: cfg.quantity,
+    })
+}

@@ -1,0 +1,241 @@
+//! The EMVA 1288 photon-transfer measurement, run on the simulated camera as a lab would run it
+//! on the real one: pairs of flat frames at increasing light, a dark pair, and averaged frames
+//! for the spatial non-uniformities. Model (EMVA 1288 release 3.1, section 2):
+//! μ_y = μ_y.dark + K·μ_e and σ_y² = K²σ_d² + σ_q² + K(μ_y − μ_y.dark), σ_q² = 1/12 DN².
+
+use crate::sensor::Sensor;
+use crate::sensor::Stream;
+use serde::Serialize;
+use specmux_core::error::Error;
+use specmux_core::error::Result;
+use specmux_core::Cube;
+
+/// Frames averaged for the DSNU and PRNU measurement (EMVA 1288 asks for a sequence of L frames
+/// so that the temporal noise left in the average, σ_y²/L, is small next to the spatial one).
+pub const NONUNIFORMITY_FRAMES: usize = 16;
+
+/// Quantisation noise of a uniform rounding ADC (DN²).
+const QUANTISATION_VARIANCE_DN2: f64 = 1.0 / 12.0;
+
+/// Below this dark variance (DN²) the read noise is not resolved by the ADC (EMVA 1288 3.1:
+/// σ_y.dark² < 0.24 DN²); the read noise reported is then only indicative.
+const QUANTISATION_LIMIT_DN2: f64 = 0.24;
+
+/// Upper end of the linear fit range as a fraction of the saturation signal above dark (EMVA
+/// 1288 3.1: 0 … 70 % of μ_y.sat − μ_y.dark).
+const FIT_RANGE_FRACTION: f64 = 0.7;
+
+/// One level of the photon-transfer curve.
+#[derive(Clone, Debug, Serialize)]
+pub struct PtcPoint {
+    /// Mean photo-electrons asked of the light source (before PRNU).
+    pub level_e: f64,
+    /// μ_y: mean of the pair (DN).
+    pub mean_dn: f64,
+    /// σ_y²: temporal variance, var(A − B)/2 (DN²).
+    pub variance_dn2: f64,
+}
+
+/// What the photon-transfer measurement finds.
+#[derive(Clone, Debug, Serialize)]
+pub struct PtcResult {
+    /// Overall system gain K (DN/e⁻): slope of σ_y² − σ_y.dark² against μ_y − μ_y.dark.
+    pub k_dn_per_e: f64,
+    /// Standard error of K from the sampling variance of each σ_y², 2σ_y⁴/(N − 1).
+    pub k_stderr_dn_per_e: f64,
+    /// Intercept of the fitted line (DN²); near zero when the model holds.
+    pub fit_offset_dn2: f64,
+    /// Upper end of the fit range, μ_y − μ_y.dark (DN).
+    pub fit_max_signal_dn: f64,
+    /// Temporal dark noise σ_d = √(σ_y.dark² − σ_q²)/K (e⁻): read noise and dark-current shot
+    /// noise together, as EMVA 1288 defines it.
+    pub read_noise_e: f64,
+    /// True when σ_y.dark² < 0.24 DN²: the ADC does not resolve the dark noise.
+    pub quantisation_limited: bool,
+    /// Saturation capacity μ_e.sat = (μ_y.sat − μ_y.dark)/K (e⁻), μ_y.sat at the maximum of the
+    /// variance curve.
+    pub full_well_e: f64,
+    /// μ_y.sat (DN).
+    pub saturation_mean_dn: f64,
+    /// μ_y.dark and σ_y.dark² of the dark pair.
+    pub dark_mean_dn: f64,
+    pub dark_variance_dn2: f64,
+    /// PRNU1288: √(s_y.50² − s_y.dark²)/(μ_y.50 − μ_y.dark), at the level nearest 50 % saturation.
+    pub prnu_fraction: f64,
+    /// DSNU1288: s_y.dark/K (e⁻).
+    pub dsnu_e: f64,
+    /// Level (e⁻) used for the PRNU.
+    pub prnu_level_e: f64,
+    /// Frames averaged for DSNU and PRNU.
+    pub nonuniformity_frames: usize,
+    /// Pixels per frame.
+    pub pixels: usize,
+    /// The curve, dark pair excluded, in increasing level.
+    pub points: Vec<PtcPoint>,
+}
+
+/// Mean of a pair and its temporal variance var(A − B)/2, free of fixed-pattern noise.
+fn pair_statistics(a: &Cube, b: &Cube) -> (f64, f64) {
+    let n = a.data.len() as f64;
+    let (mut sum, mut sum_d, mut sum_d2) = (0f64, 0f64, 0f64);
+    for (&x, &y) in a.data.iter().zip(&b.data) {
+        let d = x as f64 - y as f64;
+        sum += x as f64 + y as f64;
+        sum_d += d;
+        sum_d2 += d * d;
+    }
+    let var_d = (sum_d2 - sum_d * sum_d / n) / (n - 1.0);
+    (sum / (2.0 * n), var_d / 2.0)
+}
+
+/// Mean and spatial variance (N − 1 normalised) of a frame.
+fn spatial_statistics(c: &Cube) -> (f64, f64) {
+    let n = c.data.len() as f64;
+    let mean = c.data.iter().map(|&v| v as f64).sum::<f64>() / n;
+    let var = c
+        .data
+        .iter()
+        .map(|&v| (v as f64 - mean).powi(2))
+        .sum::<f64>()
+        / (n - 1.0);
+    (mean, var)
+}
+
+/// Levels for a photon-transfer curve of a camera with this full well: 27 even steps up to 90 %
+/// of it, then 26 steps of 1/150 of it past saturation, where the variance curve turns over.
+pub fn default_levels(full_well_e: f64) -> Vec<f64> {
+    let coarse = full_well_e / 30.0;
+    let fine = full_well_e / 150.0;
+    let mut levels: Vec<f64> = (1..=27).map(|i| i as f64 * coarse).collect();
+    levels.extend((1..=26).map(|i| 27.0 * coarse + i as f64 * fine));
+    levels
+}
+
+/// Run the EMVA 1288 photon-transfer measurement at mean photo-electron `levels` (before PRNU).
+/// The levels must climb past saturation so that the variance curve has its maximum inside.
+pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {
+    if let Some(v) = levels.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+        return Err(Error::Numerical(format!(
+            "photon transfer: level {v} e⁻; levels must be finite and > 0 (the dark pair is taken anyway)"
+        )));
+    }
+    let mut levels = levels.to_vec();
+    levels.sort_by(f64::total_cmp);
+    levels.dedup();
+    if levels.len() < 5 {
+        return Err(Error::Numerical(format!(
+            "photon transfer needs at least 5 distinct light levels, got {}",
+            levels.len()
+        )));
+    }
+    let pixels = sensor.width * sensor.height;
+    if pixels < 2 {
+        return Err(Error::Shape(
+            "photon transfer needs at least two pixels".into(),
+        ));
+    }
+    let zeros = vec![0f32; pixels];
+    let pair = |index: u64, mean_e: &[f32]| {
+        let a = sensor.expose(mean_e, Stream::PhotonTransfer, 2 * index);
+        let b = sensor.expose(mean_e, Stream::PhotonTransfer, 2 * index + 1);
+        pair_statistics(&a, &b)
+    };
+    let (dark_mean, dark_var) = pair(0, &zeros);
+    let points: Vec<PtcPoint> = levels
+        .iter()
+        .enumerate()
+        .map(|(i, &level)| {
+            let (mean_dn, variance_dn2) = pair(i as u64 + 1, &vec![level as f32; pixels]);
+            PtcPoint {
+                level_e: level,
+                mean_dn,
+                variance_dn2,
+            }
+        })
+        .collect();
+
+    // Saturation: the maximum of the variance curve, which must lie inside the series.
+    let sat = (0..points.len())
+        .max_by(|&i, &j| points[i].variance_dn2.total_cmp(&points[j].variance_dn2))
+        .expect("at least five points");
+    if sat + 1 == points.len() {
+        return Err(Error::Numerical(format!(
+            "photon transfer: the variance still rises at the brightest level ({} e⁻); add levels \
+             beyond the full well",
+            points[sat].level_e
+        )));
+    }
+    let sat_signal = points[sat].mean_dn - dark_mean;
+
+    // K: least squares of y = σ_y² − σ_y.dark² on x = μ_y − μ_y.dark over 0 … 70 % saturation.
+    let fit_max = FIT_RANGE_FRACTION * sat_signal;
+    let fit: Vec<(f64, f64, f64)> = points
+        .iter()
+        .map(|p| {
+            (
+                p.mean_dn - dark_mean,
+                p.variance_dn2 - dark_var,
+                p.variance_dn2,
+            )
+        })
+        .filter(|&(x, _, _)| x > 0.0 && x <= fit_max)
+        .collect();
+    if fit.len() < 3 {
+        return Err(Error::Numerical(format!(
+            "photon transfer: {} levels fall in the linear range (0–70 % of saturation, ≤ {:.1} DN \
+             above dark); at least 3 are needed",
+            fit.len(),
+            fit_max
+        )));
+    }
+    let m = fit.len() as f64;
+    let x_mean = fit.iter().map(|f| f.0).sum::<f64>() / m;
+    let y_mean = fit.iter().map(|f| f.1).sum::<f64>() / m;
+    let sxx: f64 = fit.iter().map(|f| (f.0 - x_mean).powi(2)).sum();
+    let sxy: f64 = fit.iter().map(|f| (f.0 - x_mean) * (f.1 - y_mean)).sum();
+    let k = sxy / sxx;
+    if !(k.is_finite() && k > 0.0) {
+        return Err(Error::Numerical(format!(
+            "photon transfer: fitted gain K = {k} DN/e⁻ is not positive"
+        )));
+    }
+    // Var(σ̂²) = 2σ⁴/(N − 1) for a sample variance of N near-Gaussian differences; the dark
+    // variance is common to all points and moves only the intercept.
+    let var_k: f64 = fit
+        .iter()
+        .map(|f| (f.0 - x_mean).powi(2) * 2.0 * f.2.powi(2) / (pixels as f64 - 1.0))
+        .sum::<f64>()
+        / (sxx * sxx);
+
+    // Non-uniformities from averaged frames, the temporal part σ_y²/L taken out.
+    let l = NONUNIFORMITY_FRAMES;
+    let (dark_avg_mean, dark_avg_var) = spatial_statistics(&sensor.dark_frame(l)?);
+    let s2_dark = dark_avg_var - dark_var / l as f64;
+    let half = (0..sat)
+        .min_by(|&i, &j| {
+            let d = |p: &PtcPoint| (p.mean_dn - dark_mean - 0.5 * sat_signal).abs();
+            d(&points[i]).total_cmp(&d(&points[j]))
+        })
+        .unwrap_or(0);
+    let (flat_mean, flat_var) = spatial_statistics(&sensor.flat_frame(points[half].level_e, l)?);
+    let s2_half = flat_var - points[half].variance_dn2 / l as f64;
+
+    Ok(PtcResult {
+        k_dn_per_e: k,
+        k_stderr_dn_per_e: var_k.sqrt(),
+        fit_offset_dn2: y_mean - k * x_mean,
+        fit_max_signal_dn: fit_max,
+        read_noise_e: (dark_var - QUANTISATION_VARIANCE_DN2).max(0.0).sqrt() / k,
+        quantisation_limited: dark_var < QUANTISATION_LIMIT_DN2,
+        full_well_e: sat_signal / k,
+        saturation_mean_dn: points[sat].mean_dn,
+        dark_mean_dn: dark_mean,
+        dark_variance_dn2: dark_var,
+        prnu_fraction: (s2_half - s2_dark).max(0.0).sqrt() / (flat_mean - dark_avg_mean),
+        dsnu_e: s2_dark.max(0.0).sqrt() / k,
+        prnu_level_e: points[half].level_e,
+        nonuniformity_frames: l,
+        pixels,
+        points,
+    })
+}
