@@ -431,7 +431,8 @@ pub fn reconstruct(
     let [t_demux, t_gap, t_unmix] = r.seconds;
     let (cube, stats) = (r.cube, r.unmix);
     exr_io::write(&out.join("cube.exr"), &cube, &band_names(&rig.grid))?;
-    say!(text, 
+    say!(
+        text,
         "demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s ({} pixels bound by r ≥ 0)",
         stats.constrained_pixels
     );
