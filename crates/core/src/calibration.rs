@@ -49,6 +49,15 @@ impl MeasuredCarrier {
     pub fn amplitude(&self) -> Complex64 {
         Complex64::new(self.amplitude[0], self.amplitude[1])
     }
+
+    /// The same carrier with its amplitude and white level in units `k` times larger.
+    pub fn scaled(&self, k: f64) -> MeasuredCarrier {
+        MeasuredCarrier {
+            amplitude: [self.amplitude[0] * k, self.amplitude[1] * k],
+            white_level: self.white_level * k,
+            ..*self
+        }
+    }
 }
 
 /// Dark and flat frames that turn raw DN into linear frame units.

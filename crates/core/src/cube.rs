@@ -97,6 +97,22 @@ impl Cube {
         self.data.iter().all(|v| v.is_finite())
     }
 
+    /// Plane k multiplied by `k_per_plane[k]`.
+    pub fn scaled_planes(&self, k_per_plane: &[f64]) -> Result<Cube> {
+        if k_per_plane.len() != self.planes {
+            return Err(Error::Shape(format!(
+                "{} scale factors for {} planes",
+                k_per_plane.len(),
+                self.planes
+            )));
+        }
+        let mut out = self.clone();
+        for (plane, &k) in out.planes_mut().zip(k_per_plane) {
+            plane.iter_mut().for_each(|v| *v = (*v as f64 * k) as f32);
+        }
+        Ok(out)
+    }
+
     /// Linear map across planes: out_k = Σ_j m[k][j] · in_j, pixel by pixel (m is planes_out × planes_in).
     pub fn mix(&self, m: &[Vec<f64>]) -> Result<Cube> {
         if m.iter().any(|row| row.len() != self.planes) {

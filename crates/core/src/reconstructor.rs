@@ -3,7 +3,7 @@
 //! calibrated carriers, de-alias (GAP on the calibrated patterns), undo the exposure
 //! crosstalk, unmix per pixel. It uses what a real rig knows and nothing else.
 
-use crate::calibration::Calibration;
+use crate::calibration::{Calibration, MeasuredCarrier};
 use crate::carriers::Carrier;
 use crate::demux::{Demux, WindowShape, SUPER_GAUSSIAN_ORDER};
 use crate::error::{Error, Result};
@@ -145,10 +145,9 @@ pub struct Reconstructor {
     /// GAP on the calibrated patterns; None for `method = "fourier"`.
     pub gap: Option<Gap>,
     pub unmixer: Unmixer,
-    /// Q: x_i = Σ_k Q_ik ζ_k, from the white-relative carriers ζ_k = z_k / z_k(white) to the
-    /// channels: (Wᵀ)⁻¹·diag(Wᵀ white), or diag(white) without crosstalk correction.
-    pub to_channels: Vec<Vec<f64>>,
-    /// z_k(white): the exposed value of the white target in each pattern's slot.
+    /// M = (Wᵀ)⁻¹: x_i = Σ_k M_ik z_k undoes the exposure crosstalk (None: not corrected).
+    pub demix: Option<Vec<Vec<f64>>>,
+    /// z_k(white) = Σ_i w_ik·white_i: the white target's exposed value in each pattern's slot.
     pub exposed_white: Vec<f64>,
     pub calibration: Calibration,
 }
@@ -161,14 +160,6 @@ impl Reconstructor {
         calibration: &Calibration,
         file: &str,
     ) -> Result<Reconstructor> {
-        let demux = Demux::new(design.width, design.height, &design.carriers, cfg.crop)
-            .with_window(cfg.window, SUPER_GAUSSIAN_ORDER)?
-            .with_calibration(&calibration.carriers)?;
-        let unmixer = unmixer(cfg, design)?;
-        let gap = match cfg.gap.method {
-            Method::Fourier => None,
-            _ => Some(Gap::new(&calibration.patterns, &cfg.gap, file)?),
-        };
         let weights = match cfg.crosstalk {
             CrosstalkCorrection::Timing => cfg
                 .crosstalk_weights
@@ -176,30 +167,43 @@ impl Reconstructor {
                 .or(design.exposure_weights.as_ref()),
             CrosstalkCorrection::None => None,
         };
-        let (to_channels, exposed_white) = white_to_channels(&design.white, weights)?;
+        let (demix, exposed_white) = demixing(&design.white, weights)?;
+        let carriers = in_exposed_units(&calibration.carriers, &exposed_white);
+        let demux = Demux::new(design.width, design.height, &design.carriers, cfg.crop)
+            .with_window(cfg.window, SUPER_GAUSSIAN_ORDER)?
+            .with_calibration(&carriers)?;
+        let gap = match cfg.gap.method {
+            Method::Fourier => None,
+            _ => {
+                let inv: Vec<f64> = exposed_white.iter().map(|v| 1.0 / v).collect();
+                Some(Gap::new(
+                    &calibration.patterns.scaled_planes(&inv)?,
+                    &cfg.gap,
+                    file,
+                )?)
+            }
+        };
         Ok(Reconstructor {
             demux,
             gap,
-            unmixer,
-            to_channels,
+            unmixer: unmixer(cfg, design)?,
+            demix,
             exposed_white,
             calibration: calibration.clone(),
         })
     }
 
-    /// The whole chain on one frame: linearise, demultiplex, de-alias (on the white-relative
-    /// carriers ζ; `z_truth`, the true exposed channels, gives GAP's per-iteration PSNR), undo
-    /// the crosstalk, unmix.
+    /// The whole chain on one frame: linearise, demultiplex, de-alias (on what each pattern
+    /// saw, z; `z_truth` gives GAP's per-iteration PSNR), undo the crosstalk, unmix.
     pub fn run(&self, frame: &Cube, z_truth: Option<&Cube>) -> Result<Reconstruction> {
         let t = Instant::now();
         let measured = self.calibration.linearise(frame)?;
-        let zeta = self.demux.run(&measured)?;
-        let xhat = self.to_channels(&zeta)?;
+        let zhat = self.demux.run(&measured)?;
+        let xhat = self.to_channels(&zhat)?;
         let t1 = t.elapsed().as_secs_f64();
         let (xgap, gap) = match &self.gap {
             Some(g) => {
-                let zeta_truth = z_truth.map(|z| self.relative_to_white(z)).transpose()?;
-                let (z, stats) = g.run(&measured, &zeta, zeta_truth.as_ref())?;
+                let (z, stats) = g.run(&measured, &zhat, z_truth)?;
                 (self.to_channels(&z)?, stats)
             }
             None => (xhat.clone(), GapStats::default()),
@@ -217,35 +221,25 @@ impl Reconstructor {
         })
     }
 
+    /// The calibrated carriers with amplitudes in the units of z (as this demultiplexer uses
+    /// them), for a demultiplexer of another crop.
+    pub fn demux_carriers(&self) -> Vec<MeasuredCarrier> {
+        in_exposed_units(&self.calibration.carriers, &self.exposed_white)
+    }
+
     /// x̂: the frame linearised, demultiplexed and mixed back to channels (the real-time path's
     /// first half, without de-aliasing).
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
-        let zeta = self.demux.run(&self.calibration.linearise(frame)?)?;
-        self.to_channels(&zeta)
+        let z = self.demux.run(&self.calibration.linearise(frame)?)?;
+        self.to_channels(&z)
     }
 
-    /// x = Q·ζ per pixel.
-    pub fn to_channels(&self, zeta: &Cube) -> Result<Cube> {
-        zeta.mix(&self.to_channels)
-    }
-
-    /// ζ_k = z_k / z_k(white).
-    fn relative_to_white(&self, z: &Cube) -> Result<Cube> {
-        let n = self.exposed_white.len();
-        let d: Vec<Vec<f64>> = (0..n)
-            .map(|k| {
-                (0..n)
-                    .map(|j| {
-                        if j == k {
-                            1.0 / self.exposed_white[k]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
-        z.mix(&d)
+    /// x = M·z per pixel (M = (Wᵀ)⁻¹); z unchanged without a correction.
+    pub fn to_channels(&self, z: &Cube) -> Result<Cube> {
+        match &self.demix {
+            Some(m) => z.mix(m),
+            None => Ok(z.clone()),
+        }
     }
 
     /// r̂ = B α per pixel, non-negative (times the light gains L̃ for a lit radiance scene).
@@ -265,21 +259,24 @@ pub fn unmixer(cfg: &ReconConfig, design: &Design) -> Result<Unmixer> {
     }
 }
 
-/// Q = (Wᵀ)⁻¹·diag(Wᵀ white) and Wᵀ white (or diag(white) and white without W).
-fn white_to_channels(
+/// The white target gives z_k(white)·s̃_k: divided by the design's z_k(white), the carriers
+/// come out in the units of the exposed channels z_k.
+fn in_exposed_units(measured: &[MeasuredCarrier], exposed_white: &[f64]) -> Vec<MeasuredCarrier> {
+    measured
+        .iter()
+        .zip(exposed_white)
+        .map(|(m, zw)| m.scaled(1.0 / zw))
+        .collect()
+}
+
+/// M = (Wᵀ)⁻¹ (None without weights) and z(white) = Wᵀ white (= white without weights).
+fn demixing(
     white: &[f64],
     weights: Option<&Vec<Vec<f64>>>,
-) -> Result<(Vec<Vec<f64>>, Vec<f64>)> {
+) -> Result<(Option<Vec<Vec<f64>>>, Vec<f64>)> {
     let n = white.len();
     let Some(w) = weights else {
-        let q = (0..n)
-            .map(|i| {
-                (0..n)
-                    .map(|k| if i == k { white[i] } else { 0.0 })
-                    .collect()
-            })
-            .collect();
-        return Ok((q, white.to_vec()));
+        return Ok((None, white.to_vec()));
     };
     if w.len() != n || w.iter().any(|r| r.len() != n) {
         return Err(Error::Shape(format!(
@@ -298,8 +295,5 @@ fn white_to_channels(
             zw[k]
         )));
     }
-    let q = (0..n)
-        .map(|i| (0..n).map(|k| m[i][k] * zw[k]).collect())
-        .collect();
-    Ok((q, zw))
+    Ok((Some(m), zw))
 }

@@ -436,13 +436,13 @@ pub fn sweep_crop(
                     &format!("gives an empty window on a {w}×{h} frame"),
                 ));
             }
-            d = d.with_calibration(&sim.calibration.carriers)?;
-            let zeta = d.run(&frame)?;
-            let xhat = recon.to_channels(&zeta)?;
+            d = d.with_calibration(&recon.demux_carriers())?;
+            let z = d.run(&frame)?;
+            let xhat = recon.to_channels(&z)?;
             let g = match &recon.gap {
                 Some(s) => Some(channel_error(
                     &sim.channels,
-                    &recon.to_channels(&s.run(&frame, &zeta, None)?.0)?,
+                    &recon.to_channels(&s.run(&frame, &z, None)?.0)?,
                 )?),
                 None => None,
             };

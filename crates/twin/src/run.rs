@@ -242,7 +242,7 @@ fn channel_rows(
             ssim: m_x.ssim_per_plane[i],
             bound_psnr_db: m_bound.psnr_per_plane[i],
             bound_ssim: m_bound.ssim_per_plane[i],
-            carrier_gain: recon.demux.gains[i].norm() / (0.5 * recon.exposed_white[i]),
+            carrier_gain: recon.demux.gains[i].norm() / 0.5,
         })
         .collect()
 }
