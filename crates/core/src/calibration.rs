@@ -185,12 +185,16 @@ fn measure_carrier(
         }
     }
     let (fx0, fy0) = (best.0 as f64 / w as f64, best.1 as f64 / h as f64);
+    // A Hann taper keeps the DC term and the mirror carrier from leaking into the estimate of
+    // an off-grid tone; on the grid its transform is zero two bins away, so nothing changes.
+    let tapered = hann(plane, w, h);
     let (fx, fy) = if off_grid(&spec, best.0, best.1) {
-        refine_peak(plane, w, h, fx0, fy0)
+        refine_peak(&tapered, w, h, fx0, fy0)
     } else {
         (fx0, fy0)
     };
-    let a = dtft_at(plane, w, h, fx, fy);
+    // The periodic Hann window's mean is ¼: dividing by it gives the tone's amplitude.
+    let a = dtft_at(&tapered, w, h, fx, fy) * 4.0;
     if !(a.norm() > 1e-6 * white_level.abs().max(f64::MIN_POSITIVE)) {
         return Err(Error::Numerical(format!(
             "calibration: pattern {k}'s capture carries no carrier near ({}, {}) cycles/px              (amplitude {:.3e} against a white level {white_level:.3e}); it cannot be demultiplexed",
@@ -209,6 +213,23 @@ fn measure_carrier(
         white_level,
         shift: [fx - design.fx, fy - design.fy],
     })
+}
+
+/// The plane times the separable periodic Hann window (½ − ½cos 2πx/w)(½ − ½cos 2πy/h).
+fn hann(plane: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let tau = std::f64::consts::TAU;
+    let taper = |i: usize, n: usize| 0.5 - 0.5 * (tau * i as f64 / n as f64).cos();
+    let wx: Vec<f64> = (0..w).map(|x| taper(x, w)).collect();
+    plane
+        .chunks_exact(w)
+        .enumerate()
+        .flat_map(|(y, row)| {
+            let wy = taper(y, h);
+            row.iter()
+                .zip(&wx)
+                .map(move |(&v, &t)| (v as f64 * t * wy) as f32)
+        })
+        .collect()
 }
 
 /// True when the peak at bin (kx, ky) leaks into its neighbours as an off-grid tone does:

@@ -46,11 +46,24 @@ impl Carrier {
         p
     }
 
-    /// This carrier moved to the nearest bin of a `width × height` FFT.
+    /// This carrier moved to the nearest bin of a `width × height` FFT, kept within the
+    /// Nyquist band (on an odd axis, bin (n+1)/2 is bin −(n−1)/2).
     pub fn snapped(&self, width: usize, height: usize) -> Carrier {
+        let on_grid = |f: f64, n: usize| {
+            let k = Carrier::bin(f, n);
+            let half = n as i64 / 2;
+            let k = if k > half {
+                k - n as i64
+            } else if k < -half {
+                k + n as i64
+            } else {
+                k
+            };
+            k as f64 / n as f64
+        };
         Carrier {
-            fx: Carrier::bin(self.fx, width) as f64 / width as f64,
-            fy: Carrier::bin(self.fy, height) as f64 / height as f64,
+            fx: on_grid(self.fx, width),
+            fy: on_grid(self.fy, height),
             ..*self
         }
     }

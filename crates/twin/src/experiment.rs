@@ -4,6 +4,7 @@
 //! takes the 2019 prototype's value.
 
 use crate::captures::CaptureConfig;
+use crate::optics::alignment::AlignmentConfig;
 use crate::optics::dmd::DmdConfig;
 use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging::OpticsConfig;
@@ -40,6 +41,8 @@ pub struct RigConfig {
     pub wheel: WheelConfig,
     pub camera: CameraConfig,
     pub carriers: CarrierConfig,
+    /// The DMD's image on the sensor as built (absent: exactly as designed).
+    pub alignment: Option<AlignmentConfig>,
     pub dmd: Option<DmdConfig>,
     pub fourier_filter: Option<FourierFilterConfig>,
     pub lens: Option<LensConfig>,
@@ -119,8 +122,11 @@ impl Experiment {
         self.calibration.validate(f)?;
         self.validate_rig(n)?;
         let [w, h] = self.scene.size;
+        let crop = self.reconstruct.crop;
+        // As written (band, overlap), then as placed on the bin grid.
+        carriers::check_layout(&self.rig.carriers.carriers(), crop, w, h, f)?;
         let (design, _) = self.carriers()?;
-        carriers::check_layout(&design, self.reconstruct.crop, w, h, f)
+        carriers::check_layout(&design, crop, w, h, f)
     }
 
     fn validate_carrier_count(&self, n: usize) -> Result<()> {
@@ -157,6 +163,9 @@ impl Experiment {
 
     fn validate_rig(&self, n: usize) -> Result<()> {
         let f = self.file.as_str();
+        if let Some(a) = &self.rig.alignment {
+            a.validate(f)?;
+        }
         self.rig.optics().validate(f)?;
         if let Some(t) = &self.rig.timing {
             t.validate(f)?;
@@ -215,5 +224,36 @@ mod tests {
         assert!(e.to_string().contains("scene.wavelengths_nm[2]"), "{e}");
         let e = Experiment::from_toml("[reconstruct]\ncrop = 0.3\n", "t.toml").unwrap_err();
         assert!(e.to_string().contains("overlap"), "{e}");
+    }
+
+    #[test]
+    fn carriers_off_the_bin_grid_are_refused_or_snapped() {
+        // 0.2 cycles/px on 256 pixels is bin 51.2: the user's value is refused, the nearest named.
+        let e = Experiment::from_toml(
+            "[scene]\nsize = [256, 256]\n[reconstruct]\ncrop = 0.2\n[rig.carriers]\nfrequencies = [[0.2, 0], [0, 0.2], [0.2, 0.2], [-0.2, 0.2], [0.4, 0.2], [0.2, 0.4]]\n",
+            "t.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("rig.carriers.frequencies[0]")
+                && e.contains("0.19921875")
+                && e.contains("51/256"),
+            "{e}"
+        );
+        // The default layout on a 257-pixel frame: 0.25 is bin 64.25, snapped and reported.
+        let exp = Experiment::from_toml("[scene]\nsize = [257, 257]\n", "t.toml").unwrap();
+        let (c, notes) = exp.carriers().unwrap();
+        assert!(c
+            .iter()
+            .all(|c| (c.fx * 257.0 - (c.fx * 257.0).round()).abs() < 1e-9
+                && (c.fy * 257.0 - (c.fy * 257.0).round()).abs() < 1e-9));
+        assert!(
+            !notes.is_empty() && notes[0].contains("snapped"),
+            "{notes:?}"
+        );
+        // On the grid nothing moves and nothing is said.
+        let exp = Experiment::from_toml("[scene]\nsize = [256, 256]\n", "t.toml").unwrap();
+        assert!(exp.carriers().unwrap().1.is_empty());
     }
 }

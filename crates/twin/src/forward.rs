@@ -420,13 +420,13 @@ impl Pipeline {
             Box::new(ImagedPatternStage {
                 lights: rig.pattern_lights(exp)?,
                 optics,
-                carriers: rig.carriers.clone(),
+                carriers: rig.imaged_carriers.clone(),
                 width: rig.width,
                 height: rig.height,
             })
         } else {
             Box::new(IdealPatternStage {
-                carriers: rig.carriers.clone(),
+                carriers: rig.imaged_carriers.clone(),
                 width: rig.width,
                 height: rig.height,
             })

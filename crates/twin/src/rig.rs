@@ -29,7 +29,10 @@ pub struct Rig {
     pub radiance_light: Option<Curve>,
     /// x = W r: cube bands → wheel channels, normalised (see `ColorWheel::projection`).
     pub projection: Projection,
+    /// The carriers as designed (what the DMD is programmed with).
     pub carriers: Vec<Carrier>,
+    /// The carriers as they reach the sensor (`[rig.alignment]`; the design's without it).
+    pub imaged_carriers: Vec<Carrier>,
     pub basis: Basis,
     pub width: usize,
     pub height: usize,
@@ -90,6 +93,10 @@ impl Rig {
             illuminant,
             radiance_light,
             projection,
+            imaged_carriers: match &exp.rig.alignment {
+                Some(a) => a.imaged(&carriers),
+                None => carriers.clone(),
+            },
             carriers,
             basis,
             width: exp.scene.size[0],
