@@ -8,5 +8,4 @@ pub mod patterns;
 pub mod plot;
 pub mod ptc;
 pub mod sweep;
-pub mod tables;
 pub mod timeline;

@@ -4,7 +4,7 @@
 //! own noise. The reconstruction core sees these frames and nothing else of the simulator. The
 //! oracle (the simulator's exact patterns and scale, noiseless) is kept for comparison only.
 
-use crate::forward::{multiplex, Simulated};
+use crate::multiplex::multiplex;
 use crate::sensor::Sensor;
 use serde::{Deserialize, Serialize};
 use specmux_core::calibration::CalibrationFrames;
@@ -63,11 +63,19 @@ impl CaptureConfig {
     }
 }
 
+/// What the white target meets on the simulated rig: the patterns as imaged, the exposed
+/// white per pattern slot, and the frame value the camera's full scale refers to.
+pub struct WhiteTarget<'a> {
+    pub patterns: &'a Cube,
+    pub exposed_white: &'a [f64],
+    pub full_scale: f32,
+}
+
 /// The calibration frames of the simulated rig: captured (with the camera's noise, averaged
 /// over `frames` exposures) or the oracle.
 pub fn calibration_frames(
     cfg: &CaptureConfig,
-    sim: &Simulated,
+    sim: &WhiteTarget,
     sensor: Option<&Sensor>,
 ) -> Result<CalibrationFrames> {
     let patterns = white_target_patterns(sim)?;
@@ -114,8 +122,8 @@ fn source_name(s: CalibrationSource) -> &'static str {
 
 /// P_k = z_k(white)·s̃_k: the white target while the DMD shows pattern k in its own slot and
 /// is dark in the others — the multiplexing of a white scene with one pattern on.
-fn white_target_patterns(sim: &Simulated) -> Result<Cube> {
-    let s = &sim.patterns;
+fn white_target_patterns(sim: &WhiteTarget) -> Result<Cube> {
+    let s = sim.patterns;
     let (w, h, n) = (s.width, s.height, s.planes);
     let mut out = Cube::zeros(w, h, n);
     for k in 0..n {

@@ -10,7 +10,7 @@ use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging::OpticsConfig;
 use crate::optics::psf::LensConfig;
 use crate::optics::wheel::WheelConfig;
-use crate::scene::SceneConfig;
+use crate::scene::{self, SceneConfig};
 use crate::sensor::{CameraConfig, SensorConfig};
 use crate::timing::TimingConfig;
 use serde::{Deserialize, Serialize};
@@ -107,7 +107,7 @@ impl Experiment {
     /// Check every value's range; the error names the key and the value.
     pub fn validate(&self) -> Result<()> {
         let f = self.file.as_str();
-        self.scene.validate(f)?;
+        scene::validate(&self.scene, f)?;
         let n = self.rig.wheel.filters.len();
         if n == 0 || n > 16 {
             return Err(Error::config(

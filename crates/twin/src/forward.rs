@@ -2,6 +2,7 @@
 //! asks for is built and run in light-path order; a stage it does not ask for does not exist.
 
 use crate::experiment::Experiment;
+use crate::multiplex::multiplex;
 use crate::optics::imaging;
 use crate::optics::imaging::OpticsConfig;
 use crate::optics::light::PatternLight;
@@ -14,7 +15,6 @@ use crate::sensor::Sensor;
 use crate::sensor::SensorConfig;
 use crate::timing;
 use crate::timing::TimingConfig;
-use rayon::prelude::*;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::Carrier;
@@ -317,28 +317,6 @@ impl Stage for MultiplexStage {
         st.frame = Some(y);
         Ok(())
     }
-}
-
-/// y = Σ_k z_k ⊙ s̃_k, in parallel over pixel chunks.
-pub fn multiplex(z: &Cube, s: &Cube) -> Result<Cube> {
-    z.check_same_shape(s, "channels against patterns")?;
-    let mut y = Cube::zeros(z.width, z.height, 1);
-    y.data
-        .par_chunks_mut(4096)
-        .enumerate()
-        .for_each(|(c, out)| {
-            let off = c * 4096;
-            for k in 0..z.planes {
-                let (zs, ss) = (
-                    &z.plane(k)[off..off + out.len()],
-                    &s.plane(k)[off..off + out.len()],
-                );
-                for ((o, a), b) in out.iter_mut().zip(zs).zip(ss) {
-                    *o += a * b;
-                }
-            }
-        });
-    Ok(y)
 }
 
 /// The frame value of a white reflector where every pattern is at its brightest:

@@ -6,6 +6,7 @@
 pub mod captures;
 pub mod experiment;
 pub mod forward;
+pub mod multiplex;
 pub mod optics;
 pub mod rig;
 pub mod run;

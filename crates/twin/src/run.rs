@@ -129,7 +129,12 @@ pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calib
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?),
         None => None,
     };
-    let frames = captures::calibration_frames(&exp.calibration, sim, sensor.as_ref())?;
+    let target = captures::WhiteTarget {
+        patterns: &sim.patterns,
+        exposed_white: &sim.exposed_white,
+        full_scale: sim.full_scale,
+    };
+    let frames = captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())?;
     Calibration::from_frames(&rig.carriers, &frames, exp.calibration.search_bins)
 }
 
@@ -242,9 +247,14 @@ fn channel_rows(
             ssim: m_x.ssim_per_plane[i],
             bound_psnr_db: m_bound.psnr_per_plane[i],
             bound_ssim: m_bound.ssim_per_plane[i],
-            carrier_gain: recon.demux.gains[i].norm() / 0.5,
+            carrier_gain: carrier_gain(&recon.calibration.carriers[i]),
         })
         .collect()
+}
+
+/// |ĝ|/½ of a calibrated pattern relative to its own mean: 1 for an ideal sinusoid 1 + cos.
+fn carrier_gain(m: &MeasuredCarrier) -> f64 {
+    m.amplitude().norm() / m.white_level / 0.5
 }
 
 /// The leaks of the ideal sinusoids into each channel's window; None with simulated optics or

@@ -80,19 +80,9 @@ impl SceneConfig {
             .unwrap_or_else(|| p.to_path_buf())
     }
 
-    /// Check the source, size and band grid; the error names the key and the value.
+    /// Check the size and band grid (the source: `scene::validate`); the error names the key and
+    /// the value.
     pub fn validate(&self, f: &str) -> Result<()> {
-        let known = ["dead-leaves", "shaded-objects"];
-        let prefixed = ["exr:", super::mitsuba::PREFIX].map(|p| self.source.starts_with(p));
-        if !known.contains(&self.source.as_str()) && !prefixed.contains(&true) {
-            return Err(Error::config(
-                f,
-                "scene.source",
-                format!("\"{}\"", self.source),
-                "expected \"dead-leaves\", \"shaded-objects\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
-            ));
-        }
-        super::mitsuba::check(self, f)?;
         for (k, &n) in self.size.iter().enumerate() {
             if !(16..=8192).contains(&n) {
                 return Err(Error::config(

@@ -53,6 +53,23 @@ impl Materials {
 
 /// The experiment's band grid.
 
+/// Check a `[scene]` section: the source names a built-in scene, an EXR cube or a Mitsuba
+/// render, and the size and grid are valid; the error names the key and the value.
+pub fn validate(cfg: &SceneConfig, f: &str) -> Result<()> {
+    let known = ["dead-leaves", "shaded-objects"];
+    let prefixed = ["exr:", mitsuba::PREFIX].map(|p| cfg.source.starts_with(p));
+    if !known.contains(&cfg.source.as_str()) && !prefixed.contains(&true) {
+        return Err(Error::config(
+            f,
+            "scene.source",
+            format!("\"{}\"", cfg.source),
+            "expected \"dead-leaves\", \"shaded-objects\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
+        ));
+    }
+    mitsuba::check(cfg, f)?;
+    cfg.validate(f)
+}
+
 /// Build the experiment's scene: a procedural one from held-out materials, or an EXR cube.
 pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Scene> {
     let grid = cfg.grid(file)?;

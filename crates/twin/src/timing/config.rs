@@ -149,6 +149,21 @@ impl TimingConfig {
     pub fn segment_count(&self) -> usize {
         self.wheel.segments_deg.len()
     }
+    /// Pattern k's slot on one turn: (start in [0, period), duration), from the config.
+    pub fn pattern_slots(&self) -> Vec<(f64, f64)> {
+        let period = self.period_s();
+        let mut theta = 0.0;
+        self.wheel
+            .segments_deg
+            .iter()
+            .enumerate()
+            .map(|(k, &deg)| {
+                let start = (theta / 360.0 * period + self.delay_s(k)).rem_euclid(period);
+                theta += deg;
+                (start, deg / 360.0 * period - self.dmd.dark_time_s)
+            })
+            .collect()
+    }
 
     /// One wheel turn in seconds.
     pub fn period_s(&self) -> f64 {
@@ -304,7 +319,7 @@ impl TimingConfig {
     /// Patterns must not overlap, and a dark gap between two patterns must last a picture time.
     fn validate_pattern_order(&self, file: &str, min_picture: f64, eps: f64) -> Result<()> {
         let period = self.period_s();
-        let slots = super::schedule::pattern_slots(self);
+        let slots = self.pattern_slots();
         let mut order: Vec<usize> = (0..slots.len()).collect();
         order.sort_by(|&a, &b| slots[a].0.total_cmp(&slots[b].0));
         for (pos, &a) in order.iter().enumerate() {

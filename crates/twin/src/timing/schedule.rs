@@ -12,22 +12,6 @@ pub fn disk_fraction_past(u: f64) -> f64 {
     0.5 + (u * (1.0 - u * u).sqrt() + u.asin()) / PI
 }
 
-/// Pattern k's slot on one turn: (start in [0, period), duration), from the config.
-pub(crate) fn pattern_slots(cfg: &TimingConfig) -> Vec<(f64, f64)> {
-    let period = cfg.period_s();
-    let mut theta = 0.0;
-    cfg.wheel
-        .segments_deg
-        .iter()
-        .enumerate()
-        .map(|(k, &deg)| {
-            let start = (theta / 360.0 * period + cfg.delay_s(k)).rem_euclid(period);
-            theta += deg;
-            (start, deg / 360.0 * period - cfg.dmd.dark_time_s)
-        })
-        .collect()
-}
-
 /// Where the light is at one instant.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum WheelState {
@@ -83,7 +67,7 @@ impl Schedule {
             rho,
             half_crossing_s: rho.asin() / (2.0 * PI) * period,
             spoke_s,
-            slots: pattern_slots(cfg),
+            slots: cfg.pattern_slots(),
         }
     }
 

@@ -1,7 +1,6 @@
 //! Tests of the timing model against hand-solved cases, brute-force sampling and properties.
 
 use super::*;
-use crate::timing::schedule::pattern_slots;
 use crate::timing::schedule::GaussLegendre;
 use crate::timing::schedule::Schedule;
 use crate::timing::weights::exposure_energy;
@@ -470,7 +469,7 @@ fn crosstalk_inverse_demixes() {
 
 /// Time pattern k is shown within [t0, t0+T), by interval arithmetic on the slots alone.
 fn shown_time(c: &TimingConfig, k: usize) -> f64 {
-    let (start, dur) = pattern_slots(c)[k];
+    let (start, dur) = c.pattern_slots()[k];
     let p = c.period_s();
     let (a, b) = (c.camera.start_s, c.camera.start_s + c.camera.exposure_s);
     let mut total = 0.0;

@@ -1,1 +1,0 @@
-//! Fixed-width text tables of the reports, as the CLI prints them.
