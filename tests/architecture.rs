@@ -49,7 +49,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["multiplex"],
             &["captures"],
             &["experiment"],
-            &["rig"],
+            &["budget", "rig"],
             &["forward"],
             &["run"],
         ],

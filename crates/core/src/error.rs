@@ -41,6 +41,14 @@ pub enum Error {
     /// A numerical problem the input makes unsolvable (a singular system, an empty window).
     #[error("numerical: {0}")]
     Numerical(String),
+    /// A problem found late, deep in numerical code, with the input that led there.
+    #[error("{file}: `{key}` = {value}: {source}")]
+    Within {
+        file: String,
+        key: String,
+        value: String,
+        source: Box<Error>,
+    },
 }
 
 /// Result alias for the crate.
@@ -54,6 +62,20 @@ impl Error {
             key: key.to_string(),
             value: value.to_string(),
             reason: reason.to_string(),
+        }
+    }
+
+    /// Name the input behind a numerical or shape error found late (`file`, `key`, `value`);
+    /// errors that already name their source (a file, a key, a curve) are returned unchanged.
+    pub fn within(self, file: &str, key: &str, value: impl std::fmt::Display) -> Self {
+        match self {
+            Error::Numerical(_) | Error::Shape(_) => Error::Within {
+                file: file.to_string(),
+                key: key.to_string(),
+                value: value.to_string(),
+                source: Box::new(self),
+            },
+            named => named,
         }
     }
 

@@ -24,11 +24,41 @@ pub struct Metrics {
     pub rmse: f64,
     /// RMSE divided by the peak.
     pub nrmse: f64,
-    /// Mean spectral angle in degrees over pixels where both spectra are non-zero.
-    pub sam_deg: f64,
-    /// Pixels left out of SAM because a spectrum is zero.
-    pub sam_skipped: usize,
+    /// Mean spectral angle in degrees over pixels where both spectra are non-zero; None (null
+    /// in JSON, "undefined" in tables) when there is no such pixel.
+    pub sam_deg: Option<f64>,
+    /// Pixels where the angle is undefined because a spectrum is zero (left out of SAM).
+    pub sam_undefined: usize,
     pub peak: f64,
+    /// What makes these figures less than they seem: a degenerate estimate (all zero,
+    /// constant) or SAM undefined on part of the image. Empty when nothing is amiss.
+    pub flags: Vec<String>,
+}
+
+/// A figure for a table: `undefined` for None, else with `digits` decimals.
+pub fn show(value: Option<f64>, digits: usize) -> String {
+    value.map_or_else(|| "undefined".into(), |v| format!("{v:.digits$}"))
+}
+
+/// The warnings an estimate deserves whatever its error: degenerate content, undefined angles.
+fn flags(estimate: &Cube, sam_undefined: usize) -> Vec<String> {
+    let mut out = Vec::new();
+    let (lo, hi) = estimate
+        .data
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    if hi == 0.0 && lo == 0.0 {
+        out.push("the estimate is zero everywhere".into());
+    } else if hi == lo {
+        out.push(format!("the estimate is constant ({hi})"));
+    }
+    if sam_undefined > 0 {
+        out.push(format!(
+            "SAM undefined at {sam_undefined} of {} pixels (a zero spectrum has no angle)",
+            estimate.pixels()
+        ));
+    }
+    out
 }
 
 /// Compare an estimate with the truth (same shape).
@@ -94,7 +124,7 @@ pub fn compare(truth: &Cube, estimate: &Cube) -> Result<Metrics> {
     let ssim = ssim_per_plane.iter().sum::<f64>() / ssim_per_plane.len() as f64;
     let rmse = (mse.iter().sum::<f64>() / mse.len() as f64).sqrt();
     let (sam_sum, sam_count) = sam(truth, estimate);
-    let sam_skipped = truth.pixels() - sam_count;
+    let sam_undefined = truth.pixels() - sam_count;
     Ok(Metrics {
         psnr_db,
         psnr_per_plane,
@@ -103,13 +133,10 @@ pub fn compare(truth: &Cube, estimate: &Cube) -> Result<Metrics> {
         ssim_per_plane,
         rmse,
         nrmse: rmse / peak,
-        sam_deg: if sam_count > 0 {
-            (sam_sum / sam_count as f64).to_degrees()
-        } else {
-            0.0
-        },
-        sam_skipped,
+        sam_deg: (sam_count > 0).then(|| (sam_sum / sam_count as f64).to_degrees()),
+        sam_undefined,
         peak,
+        flags: flags(estimate, sam_undefined),
     })
 }
 
@@ -265,7 +292,22 @@ mod tests {
         let e = Cube::from_vec(2, 1, 2, vec![0.0, 6.0, 2.0, 2.0]).unwrap();
         // Pixel 0: (1,0) vs (0,2) → 90°; pixel 1: (3,1) vs (6,2) → 0°.
         let m = compare(&t, &e).unwrap();
-        assert!((m.sam_deg - 45.0).abs() < 1e-9);
+        assert!((m.sam_deg.unwrap() - 45.0).abs() < 1e-9);
+        assert!(m.flags.is_empty(), "{:?}", m.flags);
+    }
+
+    #[test]
+    fn a_zero_estimate_cannot_flatter() {
+        // An all-zero cube (what η = 1e300 gives) has no spectral angle anywhere: undefined, not 0°.
+        let t = cube(4, 4, 3, |i| 0.1 + i as f32);
+        let m = compare(&t, &cube(4, 4, 3, |_| 0.0)).unwrap();
+        assert_eq!(m.sam_deg, None);
+        assert_eq!(m.sam_undefined, 16);
+        assert!(m.flags.iter().any(|f| f.contains("zero everywhere")), "{:?}", m.flags);
+        assert_eq!(show(m.sam_deg, 2), "undefined");
+        let c = compare(&t, &cube(4, 4, 3, |_| 0.5)).unwrap();
+        assert!(c.flags.iter().any(|f| f.contains("constant")), "{:?}", c.flags);
+        assert!(c.sam_deg.is_some());
     }
 
     #[test]

@@ -167,7 +167,12 @@ impl Reconstructor {
                 .or(design.exposure_weights.as_ref()),
             CrosstalkCorrection::None => None,
         };
-        let (demix, exposed_white) = demixing(&design.white, weights)?;
+        let source = match (&cfg.crosstalk_weights, &design.exposure_weights) {
+            (Some(_), _) => "reconstruct.crosstalk_weights",
+            (None, _) => "rig.timing",
+        };
+        let (demix, exposed_white) = demixing(&design.white, weights)
+            .map_err(|e| e.within(file, source, "the exposure weights w_ik it gives"))?;
         let carriers = in_exposed_units(&calibration.carriers, &exposed_white);
         let demux = Demux::new(design.width, design.height, &design.carriers, cfg.crop)
             .with_window(cfg.window, SUPER_GAUSSIAN_ORDER)?
@@ -186,7 +191,9 @@ impl Reconstructor {
         Ok(Reconstructor {
             demux,
             gap,
-            unmixer: unmixer(cfg, design)?,
+            unmixer: unmixer(cfg, design).map_err(|e| {
+                e.within(file, "rig.wheel.filters", "the system matrix F of these filters, basis and η")
+            })?,
             demix,
             exposed_white,
             calibration: calibration.clone(),

@@ -4,4 +4,5 @@
 pub mod atomic;
 pub mod exr;
 pub mod json;
+pub mod output_set;
 pub mod png;

@@ -131,7 +131,7 @@ pub struct BenchRow {
     /// Final cube r̂ against the true cube.
     pub psnr_db: f64,
     pub ssim: f64,
-    pub sam_deg: f64,
+    pub sam_deg: Option<f64>,
     /// The channel estimate after de-aliasing (x̂ for `fourier`) against the true channels.
     pub x_psnr_db: f64,
     /// Median wall time of demultiplex + de-alias + unmix over the repeats.
@@ -260,11 +260,11 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
     );
     for r in rows {
         s += &format!(
-            "| {} | {:.2} | {:.4} | {:.2} | {:.2} | {:.4} | {:.3} / {:.3} / {:.3} | {} |\n",
+            "| {} | {:.2} | {:.4} | {} | {:.2} | {:.4} | {:.3} / {:.3} / {:.3} | {} |\n",
             r.label,
             r.psnr_db,
             r.ssim,
-            r.sam_deg,
+            metrics::show(r.sam_deg, 2),
             r.x_psnr_db,
             r.seconds,
             r.stage_seconds[0],
@@ -654,7 +654,7 @@ mod tests {
         let rows = work_precision(&sim, &grid, 2).unwrap();
         assert_eq!(rows.len(), 2);
         for r in &rows {
-            assert!(r.psnr_db.is_finite() && r.ssim.is_finite() && r.sam_deg.is_finite());
+            assert!(r.psnr_db.is_finite() && r.ssim.is_finite() && r.sam_deg.is_some_and(f64::is_finite));
             assert_eq!(r.seconds_all.len(), 2);
         }
         assert!(rows.iter().any(|r| r.pareto));

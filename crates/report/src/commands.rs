@@ -4,6 +4,7 @@ use crate::plot::Colorimetry;
 use specmux_core::spectral::{Grid, Library};
 use specmux_core::{Error, Result};
 use specmux_io::exr as exr_io;
+use specmux_io::output_set::OutputSet;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::run::{self, RunData, RunReport};
 use std::path::Path;
@@ -14,6 +15,15 @@ macro_rules! say {
         use std::fmt::Write;
         let _ = writeln!($text, $($t)*);
     }};
+}
+
+/// Commit the command's output set and say where it went (and what leftovers it removed).
+fn finish(files: OutputSet, out: &Path, text: &mut String) -> Result<()> {
+    for note in files.commit()? {
+        say!(text, "{note}");
+    }
+    say!(text, "wrote {}", out.display());
+    Ok(())
 }
 
 /// The experiment a `--scene` names: a built-in scene or a TOML file.
@@ -48,8 +58,9 @@ pub fn demo(scene: &str, size: Option<usize>, out: &Path, lib: &Library) -> Resu
     let exp = experiment_for(scene, size)?;
     let (rep, data) = run::run(&exp, lib)?;
     say!(text, "{}", rep.table());
-    write_run_files(&exp, &rep, &data, out, lib)?;
-    say!(text, "wrote {}", out.display());
+    let files = OutputSet::begin(out)?;
+    write_run_files(&exp, &rep, &data, &files, lib)?;
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -57,15 +68,15 @@ fn write_run_files(
     exp: &Experiment,
     rep: &RunReport,
     d: &RunData,
-    out: &Path,
+    files: &OutputSet,
     lib: &Library,
 ) -> Result<()> {
     let grid = exp.scene.grid(&exp.file)?;
-    exr_io::write(&out.join("frame.exr"), &d.frame, &["Y".to_string()])?;
-    specmux_io::png::plane_png(&out.join("frame.png"), &d.frame, 0)?;
-    exr_io::write(&out.join("cube.exr"), &d.cube, &band_names(&grid))?;
+    exr_io::write(&files.path("frame.exr"), &d.frame, &["Y".to_string()])?;
+    specmux_io::png::plane_png(&files.path("frame.png"), &d.frame, 0)?;
+    exr_io::write(&files.path("cube.exr"), &d.cube, &band_names(&grid))?;
     let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
-    exr_io::write(&out.join("channels.exr"), &d.xhat, &ch)?;
+    exr_io::write(&files.path("channels.exr"), &d.xhat, &ch)?;
     let light = match exp.scene.quantity {
         specmux_twin::scene::Quantity::Reflectance => Some(lib.curve(&exp.scene.illuminant)?),
         specmux_twin::scene::Quantity::Radiance => None,
@@ -78,12 +89,12 @@ fn write_run_files(
     };
     for (name, cube) in [("truth_rgb.png", &d.truth), ("cube_rgb.png", &d.cube)] {
         specmux_io::png::write_png(
-            &out.join(name),
+            &files.path(name),
             image::DynamicImage::ImageRgb8(col.preview(cube, exposure)?),
         )?;
     }
-    crate::plot::spectra_plot(&out.join("spectra.png"), &grid, &d.truth, &d.cube)?;
-    specmux_io::json::write_json(&out.join("report.json"), rep)
+    crate::plot::spectra_plot(&files.path("spectra.png"), &grid, &d.truth, &d.cube)?;
+    specmux_io::json::write_json(&files.path("report.json"), rep)
 }
 
 pub fn bench(
@@ -107,17 +118,18 @@ pub fn bench(
     let rows = crate::bench::work_precision(&sim, &crate::bench::default_grid(), repeats)?;
     let md = crate::bench::work_precision_markdown(&rows);
     say!(text, "{md}");
-    specmux_io::atomic::write_bytes(&out.join("bench.md"), md.as_bytes())?;
-    specmux_io::json::write_json(&out.join("bench.json"), &rows)?;
+    let files = OutputSet::begin(out)?;
+    specmux_io::atomic::write_bytes(&files.path("bench.md"), md.as_bytes())?;
+    specmux_io::json::write_json(&files.path("bench.json"), &rows)?;
     crate::bench::work_precision_plot(
-        &out.join("pareto.png"),
+        &files.path("pareto.png"),
         &format!(
             "{} {}×{}: error against run time ({threads} threads)",
             scene, sim.frame.width, sim.frame.height
         ),
         &rows,
     )?;
-    say!(text, "wrote {}", out.display());
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -156,10 +168,11 @@ pub fn sweep_crop(
             "{scene}: Fourier PSNR peaks at crop {crop:.3} ({psnr:.2} dB)"
         );
     }
-    specmux_io::atomic::write_bytes(&out.join("sweep.md"), md.as_bytes())?;
-    specmux_io::json::write_json(&out.join("sweep.json"), &rows)?;
-    crate::bench::sweep_plot(&out.join("sweep_crop.png"), &rows)?;
-    say!(text, "wrote {}", out.display());
+    let files = OutputSet::begin(out)?;
+    specmux_io::atomic::write_bytes(&files.path("sweep.md"), md.as_bytes())?;
+    specmux_io::json::write_json(&files.path("sweep.json"), &rows)?;
+    crate::bench::sweep_plot(&files.path("sweep_crop.png"), &rows)?;
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -185,9 +198,10 @@ pub fn sweep(
         exp.scene.size[0],
         exp.scene.size[1]
     );
-    specmux_io::atomic::write_bytes(&out.join("sweep.md"), md.as_bytes())?;
-    specmux_io::json::write_json(&out.join("sweep.json"), &rows)?;
-    say!(text, "wrote {}", out.display());
+    let files = OutputSet::begin(out)?;
+    specmux_io::atomic::write_bytes(&files.path("sweep.md"), md.as_bytes())?;
+    specmux_io::json::write_json(&files.path("sweep.json"), &rows)?;
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -223,9 +237,10 @@ pub fn patterns(
             rows.len(),
             t.elapsed().as_secs_f64()
         );
-        specmux_io::atomic::write_bytes(&out.join("study.md"), md.as_bytes())?;
-        specmux_io::json::write_json(&out.join("study.json"), &rows)?;
-        say!(text, "wrote {}", out.display());
+        let files = OutputSet::begin(out)?;
+        specmux_io::atomic::write_bytes(&files.path("study.md"), md.as_bytes())?;
+        specmux_io::json::write_json(&files.path("study.json"), &rows)?;
+        finish(files, out, &mut text)?;
         return Ok(text);
     }
     let (rep, set) = pr::pattern_report(
@@ -282,9 +297,10 @@ pub fn patterns(
         let row: Vec<String> = c.crosstalk.iter().map(|v| format!("{v:9.2e}")).collect();
         say!(text, "{}", row.join(" "));
     }
-    pr::write_pattern_pngs(&set, out)?;
-    specmux_io::json::write_json(&out.join("patterns.json"), &rep)?;
-    say!(text, "wrote {}", out.display());
+    let files = OutputSet::begin(out)?;
+    pr::write_pattern_pngs(&set, files.dir())?;
+    specmux_io::json::write_json(&files.path("patterns.json"), &rep)?;
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -321,9 +337,10 @@ pub fn timing(scene: &str, out: &Path) -> Result<String> {
             "no warnings: whole turns, aligned, within the DMD's and the camera's rates"
         );
     }
-    crate::timeline::timeline_png(&cfg, &out.join("timeline.png"))?;
-    specmux_io::json::write_json(&out.join("timing.json"), &tw)?;
-    say!(text, "wrote {}", out.display());
+    let files = OutputSet::begin(out)?;
+    crate::timeline::timeline_png(&cfg, &files.path("timeline.png"))?;
+    specmux_io::json::write_json(&files.path("timing.json"), &tw)?;
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -368,9 +385,10 @@ pub fn ptc(scene: Option<&str>, size: usize, out: &Path) -> Result<String> {
         r.k_stderr_dn_per_e,
         r.pixels
     );
-    crate::ptc::plot_ptc(&r, &out.join("ptc.png"))?;
-    specmux_io::json::write_json(&out.join("ptc.json"), &r)?;
-    say!(text, "wrote {}", out.display());
+    let files = OutputSet::begin(out)?;
+    crate::ptc::plot_ptc(&r, &files.path("ptc.png"))?;
+    specmux_io::json::write_json(&files.path("ptc.json"), &r)?;
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -385,19 +403,20 @@ pub fn simulate(path: &Path, explain: bool, out: &Path, lib: &Library) -> Result
         return Ok(text);
     }
     let (sim, times) = pipeline.run()?;
-    exr_io::write(&out.join("frame.exr"), &sim.frame, &["Y".to_string()])?;
-    specmux_io::png::plane_png(&out.join("frame.png"), &sim.frame, 0)?;
+    let files = OutputSet::begin(out)?;
+    exr_io::write(&files.path("frame.exr"), &sim.frame, &["Y".to_string()])?;
+    specmux_io::png::plane_png(&files.path("frame.png"), &sim.frame, 0)?;
     let scene = &sim.scene;
     exr_io::write(
-        &out.join("truth.exr"),
+        &files.path("truth.exr"),
         &scene.cube,
         &band_names(&scene.grid),
     )?;
-    specmux_io::json::write_json(&out.join("simulate.json"), &times)?;
+    specmux_io::json::write_json(&files.path("simulate.json"), &times)?;
     for t in &times {
         say!(text, "{:<15} {:>8.4} s", t.stage, t.seconds);
     }
-    say!(text, "wrote {}", out.display());
+    finish(files, out, &mut text)?;
     Ok(text)
 }
 
@@ -413,15 +432,14 @@ pub fn reconstruct(
         Some(p) => load(p)?,
         None => Experiment::prototype(),
     };
-    let (frame, _) = exr_io::read(frame_path)?;
-    if frame.planes != 1 {
-        return Err(Error::Exr {
-            path: frame_path.to_path_buf(),
-            msg: format!("a frame has one channel, this file has {}", frame.planes),
-        });
-    }
+    let frame = read_frame(frame_path)?;
     exp.scene.size = [frame.width, frame.height];
     exp.validate()?;
+    let grid = exp.scene.grid(&exp.file)?;
+    // Every input is read and checked before any work and any output.
+    let truth = truth
+        .map(|p| read_truth(p, &frame, grid.count).map(|c| (p, c)))
+        .transpose()?;
     let materials = specmux_twin::scene::Materials::load(lib)?;
     let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
     // The calibration frames of this rig, as the twin captures them.
@@ -429,27 +447,56 @@ pub fn reconstruct(
     let recon = run::reconstructor(&exp, &rig, &sim)?;
     let r = recon.run(&frame, None)?;
     let [t_demux, t_gap, t_unmix] = r.seconds;
-    let (cube, stats) = (r.cube, r.unmix);
-    exr_io::write(&out.join("cube.exr"), &cube, &band_names(&rig.grid))?;
     say!(
         text,
         "demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s ({} pixels bound by r ≥ 0)",
-        stats.constrained_pixels
+        r.unmix.constrained_pixels
     );
-    if let Some(tp) = truth {
-        let (tc, _) = exr_io::read(tp)?;
-        let m = specmux_core::metrics::compare(&tc, &cube)?;
+    let files = OutputSet::begin(out)?;
+    exr_io::write(&files.path("cube.exr"), &r.cube, &band_names(&grid))?;
+    if let Some((tp, tc)) = truth {
+        let m = specmux_core::metrics::compare(&tc, &r.cube)?;
         say!(
             text,
-            "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {:.2}°",
+            "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {}°",
             tp.display(),
             m.psnr_db,
             m.ssim,
             m.nrmse,
-            m.sam_deg
+            specmux_core::metrics::show(m.sam_deg, 2)
         );
-        specmux_io::json::write_json(&out.join("metrics.json"), &m)?;
+        for f in &m.flags {
+            say!(text, "warning: {f}");
+        }
+        specmux_io::json::write_json(&files.path("metrics.json"), &m)?;
     }
-    say!(text, "wrote {}", out.display());
+    finish(files, out, &mut text)?;
     Ok(text)
+}
+
+/// A camera frame: one channel of an EXR file.
+fn read_frame(path: &Path) -> Result<specmux_core::Cube> {
+    let (frame, _) = exr_io::read(path)?;
+    if frame.planes != 1 {
+        return Err(Error::Exr {
+            path: path.to_path_buf(),
+            msg: format!("a frame has one channel, this file has {}", frame.planes),
+        });
+    }
+    Ok(frame)
+}
+
+/// A truth cube that matches the frame's size and the experiment's band count.
+fn read_truth(path: &Path, frame: &specmux_core::Cube, bands: usize) -> Result<specmux_core::Cube> {
+    let (cube, _) = exr_io::read(path)?;
+    if (cube.width, cube.height, cube.planes) != (frame.width, frame.height, bands) {
+        return Err(Error::Exr {
+            path: path.to_path_buf(),
+            msg: format!(
+                "a {}×{}×{} truth for a {}×{} frame and {bands} bands (scene.wavelengths_nm)",
+                cube.width, cube.height, cube.planes, frame.width, frame.height
+            ),
+        });
+    }
+    Ok(cube)
 }

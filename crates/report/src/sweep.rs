@@ -141,7 +141,7 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                     channels_psnr_db: x.map(|r| r.psnr_db),
                     cube_psnr_db: cube.map(|r| r.psnr_db),
                     cube_ssim: cube.map(|r| r.ssim),
-                    cube_sam_deg: cube.map(|r| r.sam_deg),
+                    cube_sam_deg: cube.and_then(|r| r.sam_deg),
                     carrier_gain: rep
                         .channels
                         .iter()

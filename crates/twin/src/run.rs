@@ -27,8 +27,10 @@ pub struct ResultRow {
     pub psnr_db: f64,
     pub ssim: f64,
     pub nrmse: f64,
-    pub sam_deg: f64,
+    pub sam_deg: Option<f64>,
     pub seconds: f64,
+    /// Why these figures are less than they seem (degenerate estimate, undefined SAM).
+    pub flags: Vec<String>,
 }
 
 /// Demultiplexing of one channel against the best its crop window could do alone.
@@ -113,6 +115,7 @@ fn row(stage: &str, against: &str, m: &Metrics, seconds: f64) -> ResultRow {
         nrmse: m.nrmse,
         sam_deg: m.sam_deg,
         seconds,
+        flags: m.flags.clone(),
     }
 }
 
@@ -135,7 +138,11 @@ pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calib
         full_scale: sim.full_scale,
     };
     let frames = captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())?;
+    // A camera whose flat does not rise above its dark, a pattern with no carrier: name the
+    // section that made the frames so.
+    let key = if exp.rig.sensor.is_some() { "rig.sensor" } else { "rig" };
     Calibration::from_frames(&rig.carriers, &frames, exp.calibration.search_bins)
+        .map_err(|e| e.within(&exp.file, key, "the calibration frames it gives"))
 }
 
 /// Simulate the experiment's frame, reconstruct it and compare every stage with the truth.
@@ -158,18 +165,18 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     };
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let report = RunReport {
+        warnings: warnings(&rig, &results),
+        results,
         experiment: exp.file.clone(),
         scene: sim.scene.name.clone(),
         size: [sim.frame.width, sim.frame.height],
         bands: sim.scene.grid.count,
         forward_stages,
-        results,
         channels: channel_rows(&rig, &recon, &m_x, &m_bound),
         calibration: CalibrationReport::new(&recon),
         basis,
         unmix: out.unmix,
         error_budget,
-        warnings: rig.warnings.clone(),
         setup_seconds: t_setup,
         reconstruction_seconds: t_demux + t_gap + t_unmix,
         total_seconds: t_all.elapsed().as_secs_f64(),
@@ -182,6 +189,14 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         cube: out.cube,
     };
     Ok((report, data))
+}
+
+/// The rig's warnings, then every result row's flags, named by its stage.
+fn warnings(rig: &Rig, results: &[ResultRow]) -> Vec<String> {
+    let flagged = results
+        .iter()
+        .flat_map(|r| r.flags.iter().map(move |f| format!("{} against {}: {f}", r.stage, r.against)));
+    rig.warnings.iter().cloned().chain(flagged).collect()
 }
 
 /// The result table: demultiplexed and de-aliased channels, the crop bound, the cube and the
@@ -278,8 +293,14 @@ impl RunReport {
         );
         for r in &self.results {
             s += &format!(
-                "{:<18} {:<34} {:>9.2} {:>7.4} {:>8.4} {:>8.2} {:>10.4}\n",
-                r.stage, r.against, r.psnr_db, r.ssim, r.nrmse, r.sam_deg, r.seconds
+                "{:<18} {:<34} {:>9.2} {:>7.4} {:>8.4} {:>9} {:>10.4}\n",
+                r.stage,
+                r.against,
+                r.psnr_db,
+                r.ssim,
+                r.nrmse,
+                metrics::show(r.sam_deg, 2),
+                r.seconds
             );
         }
         s += &format!(

@@ -1,0 +1,179 @@
+//! A folder of outputs that appears all at once or not at all. The files of a run are written
+//! into a staging folder beside the target (`.NAME.staging-PID-N`); `commit` renames it into
+//! place, so a failed, killed or concurrent run never leaves a mixed or partial set under the
+//! final name. A run that fails drops its staging folder; one that was killed leaves it behind,
+//! and the next run into the same place removes it and says so.
+
+use specmux_core::{Error, Result};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// The outputs of one run, staged until `commit`.
+pub struct OutputSet {
+    target: PathBuf,
+    staging: PathBuf,
+    /// Leftovers of killed runs removed when the set began.
+    notes: Vec<String>,
+    committed: bool,
+}
+
+static SERIAL: AtomicU64 = AtomicU64::new(0);
+
+impl OutputSet {
+    /// Stage a new set for `target` (created on commit), removing stale staging folders.
+    pub fn begin(target: &Path) -> Result<OutputSet> {
+        let (parent, name) = split(target)?;
+        std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
+        let notes = remove_stale(&parent, &name)?;
+        let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
+        let staging = parent.join(format!(".{name}.staging-{}-{serial}", std::process::id()));
+        std::fs::create_dir(&staging).map_err(|e| Error::io(&staging, e))?;
+        Ok(OutputSet {
+            target: target.to_path_buf(),
+            staging,
+            notes,
+            committed: false,
+        })
+    }
+
+    /// Where a file of the set is written until the commit.
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.staging.join(name)
+    }
+
+    /// The staging folder itself, for writers that take a folder.
+    pub fn dir(&self) -> &Path {
+        &self.staging
+    }
+
+    /// Put the set in place of `target` (replacing a previous set whole) and return what the
+    /// set has to say: leftovers removed.
+    pub fn commit(mut self) -> Result<Vec<String>> {
+        let (parent, name) = split(&self.target)?;
+        // Another run may commit between our two renames: then try again (a few times).
+        for attempt in 0..8 {
+            let old = parent.join(format!(".{name}.old-{}-{attempt}", std::process::id()));
+            match std::fs::rename(&self.target, &old) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(Error::io(&self.target, e)),
+            }
+            let placed = std::fs::rename(&self.staging, &self.target);
+            let _ = std::fs::remove_dir_all(&old);
+            if placed.is_ok() {
+                self.committed = true;
+                return Ok(std::mem::take(&mut self.notes));
+            }
+        }
+        Err(Error::io(
+            &self.target,
+            std::io::Error::other("another run kept replacing this folder; try again"),
+        ))
+    }
+}
+
+impl Drop for OutputSet {
+    /// A set that was not committed (the run failed) leaves nothing behind.
+    fn drop(&mut self) {
+        if !self.committed {
+            let _ = std::fs::remove_dir_all(&self.staging);
+        }
+    }
+}
+
+/// The folder that holds `target` and the target's own name.
+fn split(target: &Path) -> Result<(PathBuf, String)> {
+    let name = target
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| {
+            Error::io(
+                target,
+                std::io::Error::other("an output folder needs a name (not `/`, `.` or `..`)"),
+            )
+        })?;
+    let parent = match target.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Ok((parent, name))
+}
+
+/// Remove `.NAME.staging-PID-*` and `.NAME.old-PID-*` folders whose process is gone; one note each.
+fn remove_stale(parent: &Path, name: &str) -> Result<Vec<String>> {
+    let entries = std::fs::read_dir(parent).map_err(|e| Error::io(parent, e))?;
+    let mut notes = Vec::new();
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let Some(pid) = [".staging-", ".old-"]
+            .iter()
+            .find_map(|kind| file.strip_prefix(&format!(".{name}{kind}")))
+            .and_then(|rest| rest.split('-').next()?.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !process_alive(pid) {
+            std::fs::remove_dir_all(entry.path()).map_err(|e| Error::io(entry.path(), e))?;
+            notes.push(format!(
+                "removed {} left by an interrupted run (process {pid})",
+                entry.path().display()
+            ));
+        }
+    }
+    Ok(notes)
+}
+
+/// Whether a process with this id is running (Linux: /proc/PID; elsewhere assumed alive, so
+/// nothing is removed that might still be written).
+fn process_alive(pid: u32) -> bool {
+    if cfg!(target_os = "linux") {
+        Path::new(&format!("/proc/{pid}")).exists()
+    } else {
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("specmux-outset-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn nothing_appears_before_the_commit_and_everything_after() {
+        let d = temp("commit");
+        let target = d.join("out");
+        let set = OutputSet::begin(&target).unwrap();
+        std::fs::write(set.path("a.txt"), "1").unwrap();
+        assert!(!target.exists());
+        set.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(target.join("a.txt")).unwrap(), "1");
+        // A second set replaces the first whole: no file of the first survives.
+        let set = OutputSet::begin(&target).unwrap();
+        std::fs::write(set.path("b.txt"), "2").unwrap();
+        set.commit().unwrap();
+        assert!(!target.join("a.txt").exists() && target.join("b.txt").exists());
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "no staging left");
+    }
+
+    #[test]
+    fn a_failed_run_leaves_nothing_and_a_dead_runs_leftovers_are_removed() {
+        let d = temp("drop");
+        let target = d.join("out");
+        {
+            let set = OutputSet::begin(&target).unwrap();
+            std::fs::write(set.path("half.exr"), "x").unwrap();
+        }
+        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0);
+        // A staging folder of a process that no longer exists (pid 0 is never a user process).
+        std::fs::create_dir(d.join(".out.staging-0-0")).unwrap();
+        let set = OutputSet::begin(&target).unwrap();
+        assert!(set.notes.iter().any(|n| n.contains("interrupted")), "{:?}", set.notes);
+        assert!(!d.join(".out.staging-0-0").exists());
+    }
+}
