@@ -157,6 +157,41 @@ pub fn check_layout(
     Ok(())
 }
 
+/// Where a carrier's second harmonic 2ω_i (which coherent 4f optics add to the pattern) falls
+/// inside another carrier's window (or its mirror's): one note per collision, naming both.
+pub fn harmonic_collisions(
+    carriers: &[Carrier],
+    crop: f64,
+    width: usize,
+    height: usize,
+) -> Vec<String> {
+    let (wx, wy) = (
+        window_bins(crop, width) as i64,
+        window_bins(crop, height) as i64,
+    );
+    let inside = |ax: i64, ay: i64, bx: i64, by: i64| {
+        2 * circ_dist(ax, bx, width) < wx && 2 * circ_dist(ay, by, height) < wy
+    };
+    let mut notes = Vec::new();
+    for (i, a) in carriers.iter().enumerate() {
+        let (hx, hy) = (
+            2 * Carrier::bin(a.fx, width),
+            2 * Carrier::bin(a.fy, height),
+        );
+        for (j, b) in carriers.iter().enumerate().filter(|(j, _)| *j != i) {
+            let (bx, by) = (Carrier::bin(b.fx, width), Carrier::bin(b.fy, height));
+            if inside(hx, hy, bx, by) || inside(hx, hy, -bx, -by) {
+                notes.push(format!(
+                    "2ω{i} = ({:.4}, {:.4}) cycles/px falls in channel {j}'s window: with coherent 4f optics channel {i}'s harmonic leaks into channel {j}",
+                    2.0 * a.fx,
+                    2.0 * a.fy
+                ));
+            }
+        }
+    }
+    notes
+}
+
 /// `[rig.carriers]`: frequencies (cycles/pixel, [fx, fy]) and phases; absent = the default
 /// 4×4-tile layout.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

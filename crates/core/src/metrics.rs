@@ -46,7 +46,9 @@ fn flags(estimate: &Cube, sam_undefined: usize) -> Vec<String> {
     let (lo, hi) = estimate
         .data
         .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
     if hi == 0.0 && lo == 0.0 {
         out.push("the estimate is zero everywhere".into());
     } else if hi == lo {
@@ -303,10 +305,18 @@ mod tests {
         let m = compare(&t, &cube(4, 4, 3, |_| 0.0)).unwrap();
         assert_eq!(m.sam_deg, None);
         assert_eq!(m.sam_undefined, 16);
-        assert!(m.flags.iter().any(|f| f.contains("zero everywhere")), "{:?}", m.flags);
+        assert!(
+            m.flags.iter().any(|f| f.contains("zero everywhere")),
+            "{:?}",
+            m.flags
+        );
         assert_eq!(show(m.sam_deg, 2), "undefined");
         let c = compare(&t, &cube(4, 4, 3, |_| 0.5)).unwrap();
-        assert!(c.flags.iter().any(|f| f.contains("constant")), "{:?}", c.flags);
+        assert!(
+            c.flags.iter().any(|f| f.contains("constant")),
+            "{:?}",
+            c.flags
+        );
         assert!(c.sam_deg.is_some());
     }
 

@@ -192,7 +192,11 @@ impl Reconstructor {
             demux,
             gap,
             unmixer: unmixer(cfg, design).map_err(|e| {
-                e.within(file, "rig.wheel.filters", "the system matrix F of these filters, basis and η")
+                e.within(
+                    file,
+                    "rig.wheel.filters",
+                    "the system matrix F of these filters, basis and η",
+                )
             })?,
             demix,
             exposed_white,
@@ -255,8 +259,21 @@ impl Reconstructor {
     }
 }
 
+/// Condition number of F above which the filters are taken not to separate the basis: beyond
+/// it the smoothness prior alone decides the spectrum (real filter sets are 1e1–1e4).
+pub const MAX_SYSTEM_CONDITION: f64 = 1e8;
+
 /// The per-pixel unmixer of a design: F, B, η per nm⁴ and the output gains of a lit radiance scene.
 pub fn unmixer(cfg: &ReconConfig, design: &Design) -> Result<Unmixer> {
+    let sv = design.system.clone().svd(false, false).singular_values;
+    let cond = sv.max() / sv.min();
+    if !(cond <= MAX_SYSTEM_CONDITION) {
+        return Err(Error::Numerical(format!(
+            "the filters do not separate the {} basis vectors: the system matrix F has condition \
+             number {cond:.2e} > {MAX_SYSTEM_CONDITION:.0e} (two filters alike, or fewer distinct filters than reconstruct.basis)",
+            design.system.ncols()
+        )));
+    }
     // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
     let eta = cfg.eta / design.band_step_nm.powi(4);
     let unmixer = Unmixer::new(&design.system, &design.basis, eta)?;

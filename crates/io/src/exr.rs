@@ -41,7 +41,11 @@ pub fn write(path: &Path, cube: &Cube, names: &[String]) -> Result<()> {
     let layer = Layer::new(
         (cube.width, cube.height),
         LayerAttributes::default(),
-        Encoding::FAST_LOSSLESS,
+        // Blocks in increasing order: the bytes do not depend on which thread compressed first.
+        Encoding {
+            line_order: LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        },
         AnyChannels::sort(channels.into()),
     );
     let image = Image::from_layer(layer);
@@ -56,6 +60,12 @@ pub fn write(path: &Path, cube: &Cube, names: &[String]) -> Result<()> {
 /// Read every channel of the first layer of an EXR file: the cube (planes in the file's
 /// channel order, which is name order) and the channel names.
 pub fn read(path: &Path) -> Result<(Cube, Vec<String>)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    read_bytes(&bytes, path)
+}
+
+/// `read` on the bytes of an EXR file; `path` names it in errors.
+pub fn read_bytes(bytes: &[u8], path: &Path) -> Result<(Cube, Vec<String>)> {
     let err = |msg: String| Error::Exr {
         path: path.to_path_buf(),
         msg,
@@ -66,7 +76,7 @@ pub fn read(path: &Path) -> Result<(Cube, Vec<String>)> {
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_buffered(std::io::Cursor::new(bytes))
         .map_err(|e| err(e.to_string()))?;
     let layer = image.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());

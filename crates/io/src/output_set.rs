@@ -173,7 +173,11 @@ mod tests {
         // A staging folder of a process that no longer exists (pid 0 is never a user process).
         std::fs::create_dir(d.join(".out.staging-0-0")).unwrap();
         let set = OutputSet::begin(&target).unwrap();
-        assert!(set.notes.iter().any(|n| n.contains("interrupted")), "{:?}", set.notes);
+        assert!(
+            set.notes.iter().any(|n| n.contains("interrupted")),
+            "{:?}",
+            set.notes
+        );
         assert!(!d.join(".out.staging-0-0").exists());
     }
 }

@@ -654,7 +654,11 @@ mod tests {
         let rows = work_precision(&sim, &grid, 2).unwrap();
         assert_eq!(rows.len(), 2);
         for r in &rows {
-            assert!(r.psnr_db.is_finite() && r.ssim.is_finite() && r.sam_deg.is_some_and(f64::is_finite));
+            assert!(
+                r.psnr_db.is_finite()
+                    && r.ssim.is_finite()
+                    && r.sam_deg.is_some_and(f64::is_finite)
+            );
             assert_eq!(r.seconds_all.len(), 2);
         }
         assert!(rows.iter().any(|r| r.pareto));

@@ -85,7 +85,10 @@ mod tests {
         let exp = Experiment::prototype();
         let e = check(&exp, 24e9).unwrap();
         let px = 768.0 * 768.0;
-        assert_eq!(e.bytes, 4.0 * px * (3.0 * 31.0 + 12.0 * 6.0) + 8.0 * 31.0 * 31.0);
+        assert_eq!(
+            e.bytes,
+            4.0 * px * (3.0 * 31.0 + 12.0 * 6.0) + 8.0 * 31.0 * 31.0
+        );
         assert_eq!(e.gap_updates, 20.0 * px * 6.0);
     }
 
@@ -93,10 +96,17 @@ mod tests {
     fn too_large_or_too_fine_is_refused_by_key() {
         let big = Experiment::from_toml("[scene]\nsize = [8192, 8192]\n", "big.toml").unwrap();
         let msg = check(&big, 24e9).unwrap_err().to_string();
-        assert!(msg.contains("big.toml") && msg.contains("scene.size") && msg.contains("GB"), "{msg}");
+        assert!(
+            msg.contains("big.toml") && msg.contains("scene.size") && msg.contains("GB"),
+            "{msg}"
+        );
         let fine =
-            Experiment::from_toml("[scene]\nwavelengths_nm = [400, 700, 0.01]\n", "fine.toml").unwrap();
+            Experiment::from_toml("[scene]\nwavelengths_nm = [400, 700, 0.01]\n", "fine.toml")
+                .unwrap();
         let msg = check(&fine, 24e9).unwrap_err().to_string();
-        assert!(msg.contains("scene.wavelengths_nm") && msg.contains("30001 bands"), "{msg}");
+        assert!(
+            msg.contains("scene.wavelengths_nm") && msg.contains("30001 bands"),
+            "{msg}"
+        );
     }
 }

@@ -1,7 +1,6 @@
 //! The forward model as a list of stages built from the experiment: each stage the experiment
 //! asks for is built and run in light-path order; a stage it does not ask for does not exist.
 
-use crate::budget;
 use crate::experiment::Experiment;
 use crate::multiplex::multiplex;
 use crate::optics::imaging;
@@ -381,8 +380,6 @@ fn timing_stage(cfg: &TimingConfig) -> Result<TimingStage> {
 impl Pipeline {
     /// The stages this experiment needs, in light-path order.
     pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
-        // Refuse a run that would not fit before anything is allocated.
-        budget::check(exp, budget::available_memory())?;
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let mut stages: Vec<Box<dyn Stage>> = vec![

@@ -1,6 +1,7 @@
 //! The rig as an experiment resolves it: curves loaded, the projection cube → channels and the
 //! spectral basis computed. The forward model, the reconstruction and the controller share it.
 
+use crate::budget;
 use crate::experiment::Experiment;
 use crate::optics::light::PatternLight;
 use crate::optics::wheel::ColorWheel;
@@ -8,6 +9,7 @@ use crate::optics::wheel::Projection;
 use crate::scene::Materials;
 use crate::scene::Quantity;
 use crate::timing;
+use specmux_core::carriers;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::reconstructor::Design;
@@ -42,22 +44,76 @@ pub struct Rig {
     pub warnings: Vec<String>,
 }
 
+/// Refuse a channel that sees no light on the cube's bands, naming its cause: an illuminant
+/// or a QE that is zero on every band, else the filter.
+fn dark_channel(
+    exp: &Experiment,
+    grid: &Grid,
+    light: [(&str, Option<&Curve>); 2],
+    wheel: &ColorWheel,
+    p: &Projection,
+) -> Result<()> {
+    let Some(i) = p.w.row_iter().position(|r| !(r.sum() > 0.0)) else {
+        return Ok(());
+    };
+    let span = format!("{}–{} nm", grid.start_nm, grid.end_nm());
+    let zero = |c: &Curve| grid.wavelengths().iter().all(|&w| c.eval(w) <= 0.0);
+    let (key, value) = match light.iter().find(|(_, c)| c.is_some_and(zero)) {
+        Some((key, Some(c))) => (key.to_string(), c.name.clone()),
+        _ => (
+            format!("rig.wheel.filters[{i}]"),
+            wheel.filters[i].name.clone(),
+        ),
+    };
+    let why = format!("no light reaches the camera through it on {span}");
+    Err(Error::config(&exp.file, &key, format!("\"{value}\""), &why))
+}
+
 impl Rig {
     /// Load the rig's curves from the library and precompute the projection and the basis.
     pub fn build(exp: &Experiment, lib: &Library, materials: &Materials) -> Result<Rig> {
+        // Refuse a run that would not fit before anything is allocated.
+        budget::check(exp, budget::available_memory())?;
         let grid = exp.scene.grid(&exp.file)?;
         let (carriers, mut warnings) = exp.carriers()?;
+        let [w, h] = exp.scene.size;
+        warnings.extend(carriers::harmonic_collisions(
+            &carriers,
+            exp.reconstruct.crop,
+            w,
+            h,
+        ));
         let exposure_weights = match &exp.rig.timing {
             Some(t) => {
                 let tw = timing::weights(t)?;
+                if let Some(k) = (0..tw.w.len()).find(|&k| tw.w.iter().all(|row| row[k] <= 0.0)) {
+                    return Err(Error::config(
+                        &exp.file,
+                        "rig.timing.camera.exposure_s",
+                        t.camera.exposure_s,
+                        &format!("pattern {k} is never shown while the camera exposes; expose whole wheel turns"),
+                    ));
+                }
                 warnings.extend(tw.warnings);
                 Some(tw.w)
             }
             None => None,
         };
+        // Transmittances, QE and light are physical quantities: never negative.
         let named = |key: &str, name: &str| {
-            lib.curve(name)
-                .map_err(|e| Error::config(&exp.file, key, format!("\"{name}\""), &e.to_string()))
+            let bad = |why: &str| Error::config(&exp.file, key, format!("\"{name}\""), why);
+            let c = lib.curve(name).map_err(|e| bad(&e.to_string()))?;
+            match c
+                .wavelengths()
+                .iter()
+                .zip(c.values())
+                .find(|(_, &v)| v < 0.0)
+            {
+                Some((w, v)) => Err(bad(&format!(
+                    "value {v} at {w} nm is negative: a transmittance, QE or light cannot be"
+                ))),
+                None => Ok(c),
+            }
         };
         let filters = exp
             .rig
@@ -85,6 +141,11 @@ impl Rig {
         };
         let wheel = ColorWheel { filters };
         let projection = wheel.projection(&grid, illuminant.as_ref(), &qe)?;
+        let light = [
+            ("scene.illuminant", illuminant.as_ref()),
+            ("rig.camera.qe", Some(&qe)),
+        ];
+        dark_channel(exp, &grid, light, &wheel, &projection)?;
         let basis = Basis::train(&materials.train, &grid, exp.reconstruct.basis)?;
         Ok(Rig {
             grid,

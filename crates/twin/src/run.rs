@@ -48,6 +48,40 @@ pub struct ChannelRow {
     pub carrier_gain: f64,
 }
 
+/// What the frame holds that a figure of merit cannot show: pixels at the ADC's top (the
+/// camera's saturation), and non-finite values.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameStats {
+    pub pixels: usize,
+    /// Pixels at or above the camera's saturation (raw frames only).
+    pub saturated_pixels: usize,
+    pub non_finite_pixels: usize,
+}
+
+impl FrameStats {
+    /// Count on `frame`; `saturation_dn` is the raw frame's ceiling (None for a linear frame).
+    pub fn of(frame: &Cube, saturation_dn: Option<f64>) -> FrameStats {
+        let top = saturation_dn.map_or(f32::INFINITY, |s| s as f32);
+        FrameStats {
+            pixels: frame.data.len(),
+            saturated_pixels: frame.data.iter().filter(|&&v| v >= top).count(),
+            non_finite_pixels: frame.data.iter().filter(|v| !v.is_finite()).count(),
+        }
+    }
+
+    /// A warning when a noticeable share of the frame is saturated (0.1 %).
+    fn warning(&self) -> Option<String> {
+        (self.saturated_pixels * 1000 > self.pixels).then(|| {
+            format!(
+                "{} of {} pixels ({:.1} %) are saturated: the reconstruction there is wrong; lower the light (rig.sensor.electrons_at_full_scale)",
+                self.saturated_pixels,
+                self.pixels,
+                100.0 * self.saturated_pixels as f64 / self.pixels as f64
+            )
+        })
+    }
+}
+
 /// What the calibration measured, and from what: "captures" (the frames a rig records) or
 /// "oracle" (the simulator's exact patterns; figures from it are not a rig's).
 #[derive(Clone, Debug, Serialize)]
@@ -85,6 +119,7 @@ pub struct RunReport {
     pub channels: Vec<ChannelRow>,
     pub basis: BasisReport,
     pub calibration: CalibrationReport,
+    pub frame: FrameStats,
     pub unmix: UnmixStats,
     /// Where each channel's demultiplexing error comes from (ideal patterns only).
     pub error_budget: Option<Vec<ErrorBudget>>,
@@ -140,7 +175,11 @@ pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calib
     let frames = captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())?;
     // A camera whose flat does not rise above its dark, a pattern with no carrier: name the
     // section that made the frames so.
-    let key = if exp.rig.sensor.is_some() { "rig.sensor" } else { "rig" };
+    let key = if exp.rig.sensor.is_some() {
+        "rig.sensor"
+    } else {
+        "rig"
+    };
     Calibration::from_frames(&rig.carriers, &frames, exp.calibration.search_bins)
         .map_err(|e| e.within(&exp.file, key, "the calibration frames it gives"))
 }
@@ -157,6 +196,11 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     let t_setup = t.elapsed().as_secs_f64();
     let out = recon.run(&sim.frame, Some(&sim.exposed))?;
     let (results, m_x, m_bound) = result_rows(exp, &recon, &sim, &out)?;
+    let saturation = match &exp.rig.sensor {
+        Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
+        None => None,
+    };
+    let frame = FrameStats::of(&sim.frame, saturation);
     let error_budget = error_budget(exp, &rig, &sim.channels)?;
     let basis = BasisReport {
         vectors: rig.basis.len(),
@@ -165,7 +209,8 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     };
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let report = RunReport {
-        warnings: warnings(&rig, &results),
+        warnings: warnings(&rig, &frame, &results),
+        frame,
         results,
         experiment: exp.file.clone(),
         scene: sim.scene.name.clone(),
@@ -192,11 +237,18 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
 }
 
 /// The rig's warnings, then every result row's flags, named by its stage.
-fn warnings(rig: &Rig, results: &[ResultRow]) -> Vec<String> {
-    let flagged = results
+fn warnings(rig: &Rig, frame: &FrameStats, results: &[ResultRow]) -> Vec<String> {
+    let flagged = results.iter().flat_map(|r| {
+        r.flags
+            .iter()
+            .map(move |f| format!("{} against {}: {f}", r.stage, r.against))
+    });
+    rig.warnings
         .iter()
-        .flat_map(|r| r.flags.iter().map(move |f| format!("{} against {}: {f}", r.stage, r.against)));
-    rig.warnings.iter().cloned().chain(flagged).collect()
+        .cloned()
+        .chain(frame.warning())
+        .chain(flagged)
+        .collect()
 }
 
 /// The result table: demultiplexed and de-aliased channels, the crop bound, the cube and the
