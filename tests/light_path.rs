@@ -59,7 +59,7 @@ fn explain_lists_only_the_stages_asked_for() {
         let (rig, m) = setup(exp);
         Pipeline::build(exp, &rig, &m)
             .unwrap()
-            .stages
+            .stages()
             .iter()
             .map(|s| s.name())
             .collect()
@@ -76,7 +76,10 @@ fn explain_lists_only_the_stages_asked_for() {
         [
             "scene",
             "colour-wheel",
-            "imaged-patterns",
+            "dmd-dither",
+            "relay-fourier-filter",
+            "lens",
+            "pixel-sampling",
             "exposure-timing",
             "multiplex",
             "sensor"
@@ -84,7 +87,15 @@ fn explain_lists_only_the_stages_asked_for() {
     );
     assert_eq!(
         names(&experiment("[rig.lens]\n")),
-        ["scene", "colour-wheel", "imaged-patterns", "multiplex"]
+        [
+            "scene",
+            "colour-wheel",
+            "grey-modulator",
+            "modulator-spectrum",
+            "lens",
+            "pixel-sampling",
+            "multiplex"
+        ]
     );
 }
 

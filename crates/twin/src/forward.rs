@@ -1,11 +1,14 @@
-//! The forward model as a list of stages built from the experiment: each stage the experiment
-//! asks for is built and run in light-path order; a stage it does not ask for does not exist.
+//! The forward model as a fixed sequence of typed steps built from the experiment:
+//! scene → channels → patterns (ideal, or the optical chain's steps) → exposure (optional
+//! timing) → frame → optional sensor. Each step takes its input by type, so no step can run
+//! before the one that makes its input; a step the experiment does not ask for is not built.
 
 use crate::experiment::Experiment;
 use crate::multiplex::multiplex;
+use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging;
-use crate::optics::imaging::OpticsConfig;
-use crate::optics::light::PatternLight;
+use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
+use crate::optics::psf::LensConfig;
 use crate::rig::Rig;
 use crate::scene;
 use crate::scene::Materials;
@@ -15,34 +18,11 @@ use crate::sensor::Sensor;
 use crate::sensor::SensorConfig;
 use crate::timing;
 use crate::timing::TimingConfig;
-use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::Carrier;
 use specmux_core::Cube;
+use std::sync::Arc;
 use std::time::Instant;
-
-/// What flows between stages.
-#[derive(Default)]
-pub struct State {
-    pub scene: Option<Scene>,
-    /// x_i: the scene seen through each wheel filter.
-    pub channels: Option<Cube>,
-    /// White's value in each channel x_i (a white reflector, or the brightest band's scale).
-    pub white: Vec<f64>,
-    /// z_k = Σ_i w_ik x_i: the light that reaches the sample while pattern k is shown, when the
-    /// timing is modelled (None: z = x).
-    pub exposed: Option<Cube>,
-    /// White's value in each z_k.
-    pub exposed_white: Vec<f64>,
-    /// s̃_k: the modulation patterns as they reach the sample.
-    pub patterns: Option<Cube>,
-    /// y: the frame.
-    pub frame: Option<Cube>,
-    /// The frame value of a white reflector under fully bright patterns (for the sensor's scale).
-    pub full_scale: f32,
-    /// True once the sensor has turned the frame into raw DN.
-    pub raw: bool,
-}
 
 /// What a run of the forward model produced: every product a later step may need.
 pub struct Simulated {
@@ -62,35 +42,17 @@ pub struct Simulated {
     pub raw: bool,
 }
 
-impl State {
-    /// The products of a finished run; names the first one no stage produced.
-    fn finish(self) -> Result<Simulated> {
-        let need = |what: &str| missing(what, "the end of the pipeline");
-        let channels = self.channels.ok_or_else(|| need("channels x_i"))?;
-        let (exposed, exposed_white) = match self.exposed {
-            Some(z) => (z, self.exposed_white),
-            None => (channels.clone(), self.white),
-        };
-        Ok(Simulated {
-            scene: self.scene.ok_or_else(|| need("a scene"))?,
-            channels,
-            exposed,
-            exposed_white,
-            patterns: self.patterns.ok_or_else(|| need("patterns s̃_k"))?,
-            frame: self.frame.ok_or_else(|| need("a frame"))?,
-            full_scale: self.full_scale,
-            raw: self.raw,
-        })
-    }
-}
-
-/// One step of the light path.
+/// A step's name and what it does with this experiment's values.
 pub trait Stage: Send + Sync {
     /// Short name, used in timings and reports.
     fn name(&self) -> &'static str;
     /// One line saying what the stage does with this experiment's values.
     fn describe(&self) -> String;
-    fn run(&self, state: &mut State) -> Result<()>;
+}
+
+/// A step of the light path: it turns its input into its output, and cannot run without it.
+pub trait Step<In, Out>: Stage {
+    fn run(&self, input: &In) -> Result<Out>;
 }
 
 /// Wall time of one stage.
@@ -100,15 +62,201 @@ pub struct StageTime {
     pub seconds: f64,
 }
 
-/// The built list of stages.
-pub struct Pipeline {
-    pub stages: Vec<Box<dyn Stage>>,
+/// x_i: the scene seen through each wheel filter, and white's value in each.
+pub struct Channels {
+    pub x: Cube,
+    pub white: Vec<f64>,
 }
 
-fn missing(what: &str, stage: &str) -> Error {
-    Error::Numerical(format!(
-        "stage `{stage}` needs {what}, which no earlier stage produced"
-    ))
+/// z_k = Σ_i w_ik x_i: the light that reaches the sample while pattern k is shown, and white's
+/// value in each.
+pub struct Exposed {
+    pub z: Cube,
+    pub white: Vec<f64>,
+}
+
+/// What the camera sums: the exposed channels and the patterns that modulate them.
+pub struct Modulated<'a> {
+    pub exposed: &'a Exposed,
+    pub patterns: &'a Cube,
+}
+
+/// y: the frame, and the value of a white reflector under fully bright patterns.
+pub struct Frame {
+    pub y: Cube,
+    pub full_scale: f32,
+}
+
+/// The built steps, in light-path order.
+pub struct Pipeline {
+    scene: SceneStage,
+    wheel: WheelStage,
+    patterns: PatternSteps,
+    timing: Option<TimingStage>,
+    multiplex: MultiplexStage,
+    sensor: Option<SensorStage>,
+}
+
+/// How the patterns are made.
+enum PatternSteps {
+    /// Ideal grey sinusoids: no optical stage asked for.
+    Ideal(IdealPatternStage),
+    /// The optical chain, one stage per physical step.
+    Imaged(OpticalSteps),
+}
+
+/// The optical chain's stages: what the modulator shows, the relay, the lens (optional), the
+/// sensor pixels.
+struct OpticalSteps {
+    modulator: ModulatorStage,
+    relay: RelayStage,
+    lens: Option<LensStage>,
+    sampling: PixelSamplingStage,
+}
+
+/// Runs `step` on `input`, appending its wall time to `times`.
+fn timed<In, Out>(times: &mut Vec<StageTime>, step: &dyn Step<In, Out>, input: &In) -> Result<Out> {
+    let t = Instant::now();
+    let out = step.run(input)?;
+    times.push(StageTime {
+        stage: step.name().to_string(),
+        seconds: t.elapsed().as_secs_f64(),
+    });
+    Ok(out)
+}
+
+impl Pipeline {
+    /// The stages this experiment needs, in light-path order.
+    pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
+        let w = &rig.projection.w;
+        let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
+        let patterns = if exp.rig.has_optics() {
+            let chain = Chain::new(
+                &exp.rig.optics(),
+                &rig.imaged_carriers,
+                &rig.pattern_lights(exp)?,
+                rig.width,
+                rig.height,
+            )?;
+            PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
+        } else {
+            PatternSteps::Ideal(IdealPatternStage {
+                carriers: rig.imaged_carriers.clone(),
+                width: rig.width,
+                height: rig.height,
+            })
+        };
+        Ok(Pipeline {
+            scene: SceneStage {
+                cfg: exp.scene.clone(),
+                file: exp.file.clone(),
+                materials: materials.clone(),
+            },
+            wheel: WheelStage {
+                w: rows,
+                names: rig.wheel.filters.iter().map(|f| f.name.clone()).collect(),
+            },
+            patterns,
+            timing: exp.rig.timing.as_ref().map(timing_stage).transpose()?,
+            multiplex: MultiplexStage,
+            sensor: match &exp.rig.sensor {
+                Some(c) => Some(SensorStage {
+                    cfg: c.clone(),
+                    sensor: Sensor::new(c, rig.width, rig.height)?,
+                }),
+                None => None,
+            },
+        })
+    }
+
+    /// The stages that will run, in order.
+    pub fn stages(&self) -> Vec<&dyn Stage> {
+        let mut out: Vec<&dyn Stage> = vec![&self.scene, &self.wheel];
+        match &self.patterns {
+            PatternSteps::Ideal(s) => out.push(s),
+            PatternSteps::Imaged(o) => {
+                out.push(&o.modulator);
+                out.push(&o.relay);
+                if let Some(l) = &o.lens {
+                    out.push(l);
+                }
+                out.push(&o.sampling);
+            }
+        }
+        if let Some(t) = &self.timing {
+            out.push(t);
+        }
+        out.push(&self.multiplex);
+        if let Some(s) = &self.sensor {
+            out.push(s);
+        }
+        out
+    }
+
+    /// One line per stage: what will run.
+    pub fn explain(&self) -> String {
+        self.stages()
+            .iter()
+            .enumerate()
+            .map(|(k, s)| format!("{:>2}. {:<20} {}\n", k + 1, s.name(), s.describe()))
+            .collect()
+    }
+
+    /// Run every stage in order, timing each.
+    pub fn run(&self) -> Result<(Simulated, Vec<StageTime>)> {
+        let mut times = Vec::new();
+        let scene = timed(&mut times, &self.scene, &())?;
+        let channels = timed(&mut times, &self.wheel, &scene)?;
+        let patterns = self.patterns.run(&mut times)?;
+        let exposed = match &self.timing {
+            Some(t) => timed(&mut times, t, &channels)?,
+            None => Exposed {
+                z: channels.x.clone(),
+                white: channels.white.clone(),
+            },
+        };
+        let modulated = Modulated {
+            exposed: &exposed,
+            patterns: &patterns,
+        };
+        let frame = timed(&mut times, &self.multiplex, &modulated)?;
+        let full_scale = frame.full_scale;
+        let (frame, raw) = match &self.sensor {
+            Some(s) => (timed(&mut times, s, &frame)?, true),
+            None => (frame.y, false),
+        };
+        let sim = Simulated {
+            scene,
+            channels: channels.x,
+            exposed: exposed.z,
+            exposed_white: exposed.white,
+            patterns,
+            frame,
+            full_scale,
+            raw,
+        };
+        Ok((sim, times))
+    }
+}
+
+impl PatternSteps {
+    /// s̃_k: the ideal patterns, or the optical chain's stages one after the other.
+    fn run(&self, times: &mut Vec<StageTime>) -> Result<Cube> {
+        match self {
+            PatternSteps::Ideal(s) => timed(times, s, &()),
+            PatternSteps::Imaged(o) => {
+                let displays = timed(times, &o.modulator, &())?;
+                let spectra = timed(times, &o.relay, &displays)?;
+                match &o.lens {
+                    Some(l) => {
+                        let images = timed(times, l, &spectra)?;
+                        timed(times, &o.sampling, &images)
+                    }
+                    None => timed(times, &o.sampling, &spectra),
+                }
+            }
+        }
+    }
 }
 
 /// Builds the scene cube.
@@ -139,9 +287,11 @@ impl Stage for SceneStage {
             s.seed
         )
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        st.scene = Some(scene::build(&self.cfg, &self.file, &self.materials)?);
-        Ok(())
+}
+
+impl Step<(), Scene> for SceneStage {
+    fn run(&self, _: &()) -> Result<Scene> {
+        scene::build(&self.cfg, &self.file, &self.materials)
     }
 }
 
@@ -149,13 +299,6 @@ impl Stage for SceneStage {
 struct WheelStage {
     w: Vec<Vec<f64>>,
     names: Vec<String>,
-}
-
-impl WheelStage {
-    /// White's value in each channel: the row sums of the projection.
-    fn white(&self) -> Vec<f64> {
-        self.w.iter().map(|r| r.iter().sum()).collect()
-    }
 }
 
 impl Stage for WheelStage {
@@ -168,14 +311,15 @@ impl Stage for WheelStage {
             self.names.join(", ")
         )
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        let scene = st
-            .scene
-            .as_ref()
-            .ok_or_else(|| missing("a scene", self.name()))?;
-        st.channels = Some(scene.cube.mix(&self.w)?);
-        st.white = self.white();
-        Ok(())
+}
+
+impl Step<Scene, Channels> for WheelStage {
+    fn run(&self, scene: &Scene) -> Result<Channels> {
+        Ok(Channels {
+            x: scene.cube.mix(&self.w)?,
+            // White's value in each channel: the row sums of the projection.
+            white: self.w.iter().map(|r| r.iter().sum()).collect(),
+        })
     }
 }
 
@@ -201,42 +345,152 @@ impl Stage for IdealPatternStage {
             f.join(" ")
         )
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        st.patterns = Some(Carrier::ideal_patterns(
+}
+
+impl Step<(), Cube> for IdealPatternStage {
+    fn run(&self, _: &()) -> Result<Cube> {
+        Ok(Carrier::ideal_patterns(
             &self.carriers,
             self.width,
             self.height,
-        ));
-        Ok(())
+        ))
     }
 }
 
-/// s̃_i as the rig images them: DMD dithering, 4f Fourier pinhole filter, lens and pixel
-/// integration, only those the experiment asks for (optics/imaging.rs).
-struct ImagedPatternStage {
-    optics: OpticsConfig,
-    carriers: Vec<Carrier>,
-    lights: Vec<PatternLight>,
-    width: usize,
-    height: usize,
+impl OpticalSteps {
+    /// One stage per physical step of `chain`'s optics; the lens only with `[rig.lens]`.
+    fn new(chain: Arc<Chain>) -> OpticalSteps {
+        let cfg = chain.config();
+        OpticalSteps {
+            modulator: ModulatorStage {
+                chain: chain.clone(),
+            },
+            relay: RelayStage {
+                filter: cfg.fourier_filter.clone(),
+                chain: chain.clone(),
+            },
+            lens: cfg.lens.clone().map(|lens| LensStage {
+                lens,
+                chain: chain.clone(),
+            }),
+            sampling: PixelSamplingStage { chain },
+        }
+    }
 }
 
-impl Stage for ImagedPatternStage {
+/// What the modulator shows for each pattern: the DMD's dither of the grey target s_i/2, or
+/// the target itself on an ideal grey modulator (optics/imaging.rs, optics/dither.rs).
+struct ModulatorStage {
+    chain: Arc<Chain>,
+}
+
+impl Stage for ModulatorStage {
     fn name(&self) -> &'static str {
-        "imaged-patterns"
+        match self.chain.config().dmd {
+            Some(_) => "dmd-dither",
+            None => "grey-modulator",
+        }
     }
     fn describe(&self) -> String {
-        imaging::stage_names(&self.optics, self.width, self.height).join("\n                    ")
+        match &self.chain.config().dmd {
+            Some(d) => format!("s_i/2 on {}", imaging::describe_dmd(d)),
+            None => format!(
+                "s_i/2 shown as is: {}",
+                imaging::describe_grey_modulator(self.chain.modulator())
+            ),
+        }
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        st.patterns = Some(imaging::imaged_patterns(
-            &self.optics,
-            &self.carriers,
-            &self.lights,
-            self.width,
-            self.height,
-        )?);
-        Ok(())
+}
+
+impl Step<(), Vec<Display>> for ModulatorStage {
+    fn run(&self, _: &()) -> Result<Vec<Display>> {
+        self.chain.dither()
+    }
+}
+
+/// The 4f relay: the intensity spectrum past the Fourier mask (its moment spectra over the
+/// light), or without a filter the modulator's whole spectrum (optics/relay.rs).
+struct RelayStage {
+    filter: Option<FourierFilterConfig>,
+    chain: Arc<Chain>,
+}
+
+impl Stage for RelayStage {
+    fn name(&self) -> &'static str {
+        match self.filter {
+            Some(_) => "relay-fourier-filter",
+            None => "modulator-spectrum",
+        }
+    }
+    fn describe(&self) -> String {
+        match &self.filter {
+            Some(f) => imaging::describe_filter(f, self.chain.modulator()),
+            None => "no Fourier filter: the modulator's whole band-limited spectrum".into(),
+        }
+    }
+}
+
+impl Step<Vec<Display>, Vec<IntensitySpectrum>> for RelayStage {
+    fn run(&self, displays: &Vec<Display>) -> Result<Vec<IntensitySpectrum>> {
+        match &self.filter {
+            Some(f) => self.chain.relay_filtered(f, displays),
+            None => Ok(self.chain.relay_open(displays)),
+        }
+    }
+}
+
+/// The projection lens and the pixel box applied to the relay's intensity (optics/psf.rs).
+struct LensStage {
+    lens: LensConfig,
+    chain: Arc<Chain>,
+}
+
+impl Stage for LensStage {
+    fn name(&self) -> &'static str {
+        "lens"
+    }
+    fn describe(&self) -> String {
+        imaging::describe_lens(&self.lens, self.chain.modulator())
+    }
+}
+
+impl Step<Vec<IntensitySpectrum>, Vec<ImageSpectrum>> for LensStage {
+    fn run(&self, spectra: &Vec<IntensitySpectrum>) -> Result<Vec<ImageSpectrum>> {
+        Ok(self.chain.lens(Some(&self.lens), spectra))
+    }
+}
+
+/// s̃_k at the sensor pixels: inverse FFT, Keys cubic resampling and normalisation by the mean.
+/// Without a lens stage it takes the relay's intensity as the image, unblurred.
+struct PixelSamplingStage {
+    chain: Arc<Chain>,
+}
+
+impl Stage for PixelSamplingStage {
+    fn name(&self) -> &'static str {
+        "pixel-sampling"
+    }
+    fn describe(&self) -> String {
+        let (w, h) = self.chain.sensor_size();
+        let unblurred = match self.chain.config().lens {
+            Some(_) => "",
+            None => " (no lens: the relay's image unblurred, one pixel per mirror)",
+        };
+        format!(
+            "inverse FFT, Keys cubic resampling onto {w}×{h} sensor pixels, s̃ normalised to the ideal pattern's mean{unblurred}"
+        )
+    }
+}
+
+impl Step<Vec<ImageSpectrum>, Cube> for PixelSamplingStage {
+    fn run(&self, images: &Vec<ImageSpectrum>) -> Result<Cube> {
+        self.chain.pixel_sampling(images)
+    }
+}
+
+impl Step<Vec<IntensitySpectrum>, Cube> for PixelSamplingStage {
+    fn run(&self, spectra: &Vec<IntensitySpectrum>) -> Result<Cube> {
+        self.chain.pixel_sampling(&self.chain.lens(None, spectra))
     }
 }
 
@@ -266,25 +520,25 @@ impl Stage for TimingStage {
             off
         );
         for w in &self.warnings {
-            s += &format!("\n                    warning: {w}");
+            s += &format!("\n                         warning: {w}");
         }
         s
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        let x = st
-            .channels
-            .as_ref()
-            .ok_or_else(|| missing("channels x_i", self.name()))?;
+}
+
+impl Step<Channels, Exposed> for TimingStage {
+    fn run(&self, x: &Channels) -> Result<Exposed> {
         // mix() takes rows = outputs: z_k = Σ_i (wᵀ)_ki x_i.
         let wt: Vec<Vec<f64>> = (0..self.w[0].len())
             .map(|k| self.w.iter().map(|row| row[k]).collect())
             .collect();
-        st.exposed_white = wt
-            .iter()
-            .map(|r| r.iter().zip(&st.white).map(|(a, b)| a * b).sum())
-            .collect();
-        st.exposed = Some(x.mix(&wt)?);
-        Ok(())
+        Ok(Exposed {
+            white: wt
+                .iter()
+                .map(|r| r.iter().zip(&x.white).map(|(a, b)| a * b).sum())
+                .collect(),
+            z: x.x.mix(&wt)?,
+        })
     }
 }
 
@@ -298,24 +552,14 @@ impl Stage for MultiplexStage {
     fn describe(&self) -> String {
         "y = Σ_k z_k ⊙ s̃_k (z = x without timing; noiseless, unquantised)".into()
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        let (x, white) = match &st.exposed {
-            Some(z) => (z, &st.exposed_white),
-            None => (
-                st.channels
-                    .as_ref()
-                    .ok_or_else(|| missing("channels x_i", self.name()))?,
-                &st.white,
-            ),
-        };
-        let s = st
-            .patterns
-            .as_ref()
-            .ok_or_else(|| missing("patterns s_i", self.name()))?;
-        let y = multiplex(x, s)?;
-        st.full_scale = full_scale(white, s);
-        st.frame = Some(y);
-        Ok(())
+}
+
+impl<'a> Step<Modulated<'a>, Frame> for MultiplexStage {
+    fn run(&self, m: &Modulated<'a>) -> Result<Frame> {
+        Ok(Frame {
+            y: multiplex(&m.exposed.z, m.patterns)?,
+            full_scale: full_scale(&m.exposed.white, m.patterns),
+        })
     }
 }
 
@@ -357,92 +601,20 @@ impl Stage for SensorStage {
             c.seed
         )
     }
-    fn run(&self, st: &mut State) -> Result<()> {
-        let y = st
-            .frame
-            .as_ref()
-            .ok_or_else(|| missing("a frame", self.name()))?;
-        let e = self.sensor.electrons_from_relative(y, st.full_scale)?;
-        st.frame = Some(self.sensor.capture(&e, 0)?);
-        st.raw = true;
-        Ok(())
+}
+
+impl Step<Frame, Cube> for SensorStage {
+    fn run(&self, f: &Frame) -> Result<Cube> {
+        let e = self.sensor.electrons_from_relative(&f.y, f.full_scale)?;
+        self.sensor.capture(&e, 0)
     }
 }
 
+/// The exposure-timing stage: the weights w_ik and the timing model's warnings.
 fn timing_stage(cfg: &TimingConfig) -> Result<TimingStage> {
     let tw = timing::weights(cfg)?;
     Ok(TimingStage {
         w: tw.w,
         warnings: tw.warnings,
     })
-}
-
-impl Pipeline {
-    /// The stages this experiment needs, in light-path order.
-    pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
-        let w = &rig.projection.w;
-        let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
-        let mut stages: Vec<Box<dyn Stage>> = vec![
-            Box::new(SceneStage {
-                cfg: exp.scene.clone(),
-                file: exp.file.clone(),
-                materials: materials.clone(),
-            }),
-            Box::new(WheelStage {
-                w: rows,
-                names: rig.wheel.filters.iter().map(|f| f.name.clone()).collect(),
-            }),
-        ];
-        stages.push(if exp.rig.has_optics() {
-            let optics = exp.rig.optics();
-            Box::new(ImagedPatternStage {
-                lights: rig.pattern_lights(exp)?,
-                optics,
-                carriers: rig.imaged_carriers.clone(),
-                width: rig.width,
-                height: rig.height,
-            })
-        } else {
-            Box::new(IdealPatternStage {
-                carriers: rig.imaged_carriers.clone(),
-                width: rig.width,
-                height: rig.height,
-            })
-        });
-        if let Some(t) = &exp.rig.timing {
-            stages.push(Box::new(timing_stage(t)?));
-        }
-        stages.push(Box::new(MultiplexStage));
-        if let Some(c) = &exp.rig.sensor {
-            stages.push(Box::new(SensorStage {
-                cfg: c.clone(),
-                sensor: Sensor::new(c, rig.width, rig.height)?,
-            }));
-        }
-        Ok(Pipeline { stages })
-    }
-
-    /// One line per stage: what will run.
-    pub fn explain(&self) -> String {
-        self.stages
-            .iter()
-            .enumerate()
-            .map(|(k, s)| format!("{:>2}. {:<15} {}\n", k + 1, s.name(), s.describe()))
-            .collect()
-    }
-
-    /// Run every stage in order, timing each.
-    pub fn run(&self) -> Result<(Simulated, Vec<StageTime>)> {
-        let mut st = State::default();
-        let mut times = Vec::new();
-        for s in &self.stages {
-            let t = Instant::now();
-            s.run(&mut st)?;
-            times.push(StageTime {
-                stage: s.name().to_string(),
-                seconds: t.elapsed().as_secs_f64(),
-            });
-        }
-        Ok((st.finish()?, times))
-    }
 }

@@ -12,6 +12,7 @@
 
 use crate::optics::dither::signed_bin;
 use crate::optics::dmd::DmdConfig;
+use crate::optics::fourier_filter::Aperture;
 use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::fourier_filter::Illumination;
 use crate::optics::fourier_filter::Light;
@@ -20,13 +21,15 @@ use crate::optics::light::PatternLight;
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_sums;
 use crate::optics::relay::passed_bins;
+use crate::optics::relay::PairSums;
+use crate::optics::relay::PassedBin;
 use rayon::prelude::*;
 use rustfft::num_complex::{Complex32, Complex64};
 use serde::{Deserialize, Serialize};
 use specmux_core::carriers::Carrier;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
-use specmux_core::fft::Fft2;
+use specmux_core::fft::{Fft2, HalfSpectrum};
 use specmux_core::spectral::Curve;
 use specmux_core::Cube;
 
@@ -101,43 +104,65 @@ impl OpticsConfig {
     }
 }
 
-/// One line per optical stage that will run (for `simulate --explain`).
+/// One line per optical stage that will run (for the pattern report).
 pub fn stage_names(cfg: &OpticsConfig, sensor_w: usize, sensor_h: usize) -> Vec<String> {
     let m = cfg.modulator(sensor_w, sensor_h);
     let mut out = Vec::new();
     match &cfg.dmd {
-        Some(d) => out.push(format!(
-            "dmd: {}×{} mirrors, {} µm pitch, fill {}, dither {}",
-            d.width,
-            d.height,
-            d.pitch_um,
-            d.fill_factor,
-            d.dither.name()
-        )),
-        None if cfg.fourier_filter.is_some() || cfg.lens.is_some() => out.push(format!(
-            "modulator: ideal grey, {}×{} pixels of {} µm",
-            m.width, m.height, m.pitch_um
-        )),
+        Some(d) => out.push(format!("dmd: {}", describe_dmd(d))),
+        None if cfg.fourier_filter.is_some() || cfg.lens.is_some() => {
+            out.push(format!("modulator: {}", describe_grey_modulator(&m)))
+        }
         None => out.push("patterns: ideal grey sinusoids 1 + cos(ω·p + φ)".into()),
     }
     if let Some(f) = &cfg.fourier_filter {
-        let light = match f.light {
-            Light::Channel => "each pattern's wheel band, exact over λ".to_string(),
-            Light::Line => format!("a {} nm line", f.wavelength_nm),
-        };
-        out.push(format!(
-            "fourier-filter: {:?} light, {light}, f = {} mm, {:?} openings of {} µm ({:.4} cycles/mirror at 550 nm) at 0, ±ω",
-            f.illumination, f.focal_length_mm, f.shape, f.pinhole_radius_um,
-            f.cycles_per_mirror(f.pinhole_radius_um, m.pitch_um, 550.0)
-        ));
+        out.push(format!("fourier-filter: {}", describe_filter(f, &m)));
     }
     if let Some(l) = &cfg.lens {
-        out.push(format!(
-            "lens: NA {} Airy OTF over each pattern's light, magnification {}, {:.3} sensor pixels per mirror, pixel integration",
-            l.na, l.magnification, l.sensor_pixels_per_mirror(m.pitch_um)
-        ));
+        out.push(format!("lens: {}", describe_lens(l, &m)));
     }
     out
+}
+
+/// What the DMD shows, in one line.
+pub fn describe_dmd(d: &DmdConfig) -> String {
+    format!(
+        "{}×{} mirrors, {} µm pitch, fill {}, dither {}",
+        d.width,
+        d.height,
+        d.pitch_um,
+        d.fill_factor,
+        d.dither.name()
+    )
+}
+
+/// The ideal grey modulator that stands in for a DMD, in one line.
+pub fn describe_grey_modulator(m: &DmdConfig) -> String {
+    format!(
+        "ideal grey, {}×{} pixels of {} µm",
+        m.width, m.height, m.pitch_um
+    )
+}
+
+/// The 4f relay's Fourier filter on modulator `m`, in one line.
+pub fn describe_filter(f: &FourierFilterConfig, m: &DmdConfig) -> String {
+    let light = match f.light {
+        Light::Channel => "each pattern's wheel band, exact over λ".to_string(),
+        Light::Line => format!("a {} nm line", f.wavelength_nm),
+    };
+    format!(
+        "{:?} light, {light}, f = {} mm, {:?} openings of {} µm ({:.4} cycles/mirror at 550 nm) at 0, ±ω",
+        f.illumination, f.focal_length_mm, f.shape, f.pinhole_radius_um,
+        f.cycles_per_mirror(f.pinhole_radius_um, m.pitch_um, 550.0)
+    )
+}
+
+/// The projection lens and pixel integration on modulator `m`, in one line.
+pub fn describe_lens(l: &LensConfig, m: &DmdConfig) -> String {
+    format!(
+        "NA {} Airy OTF over each pattern's light, magnification {}, {:.3} sensor pixels per mirror, pixel integration",
+        l.na, l.magnification, l.sensor_pixels_per_mirror(m.pitch_um)
+    )
 }
 
 /// Everything computed for a set of patterns, for the report and the PNGs.
@@ -170,7 +195,7 @@ pub fn imaged_patterns(
     Ok(simulate_patterns(cfg, carriers, lights, sensor_w, sensor_h)?.imaged)
 }
 
-/// The whole computation behind [`imaged_patterns`].
+/// The whole computation behind [`imaged_patterns`]: the steps of [`Chain`], pattern by pattern.
 pub fn simulate_patterns(
     cfg: &OpticsConfig,
     carriers: &[Carrier],
@@ -178,17 +203,8 @@ pub fn simulate_patterns(
     w: usize,
     h: usize,
 ) -> Result<PatternSet> {
-    cfg.validate("optics")?;
-    if w < 2 || h < 2 {
-        return Err(Error::Shape(format!("sensor {w}×{h}: at least 2×2 pixels")));
-    }
+    let chain = Chain::new(cfg, carriers, lights, w, h)?;
     let n = carriers.len();
-    if lights.len() != n {
-        return Err(Error::Shape(format!(
-            "{} pattern lights for {n} carriers",
-            lights.len()
-        )));
-    }
     if cfg.dmd.is_none() && cfg.fourier_filter.is_none() && cfg.lens.is_none() {
         let imaged = Carrier::ideal_patterns(carriers, w, h);
         let display: Vec<f32> = imaged.data.iter().map(|v| v / 2.0).collect();
@@ -201,14 +217,13 @@ pub fn simulate_patterns(
             grid: vec![(1, 1); n],
         });
     }
-    let m = cfg.modulator(w, h);
-    let (wd, hd) = (m.width, m.height);
+    let (wd, hd) = (chain.modulator.width, chain.modulator.height);
     let mut display = Cube::zeros(wd, hd, n);
     let mut targets = Cube::zeros(wd, hd, n);
     let mut imaged = Cube::zeros(w, h, n);
     let (mut throughput, mut masks, mut grid) = (Vec::new(), Vec::new(), Vec::new());
-    for (i, (c, light)) in carriers.iter().zip(lights).enumerate() {
-        let p = image_one(cfg, &m, c, light, w, h)?;
+    for i in 0..n {
+        let p = chain.image_one(i)?;
         display.plane_mut(i).copy_from_slice(&p.display);
         targets.plane_mut(i).copy_from_slice(&p.target);
         imaged.plane_mut(i).copy_from_slice(&p.imaged);
@@ -226,6 +241,148 @@ pub fn simulate_patterns(
     })
 }
 
+/// The optical chain of a set of patterns, one physical step at a time: the forward pipeline
+/// runs each step over every pattern as one stage, [`simulate_patterns`] runs the same steps
+/// pattern by pattern, so there is one way to compute a pattern.
+pub struct Chain {
+    cfg: OpticsConfig,
+    /// The DMD, or the ideal grey modulator that stands in for it.
+    modulator: DmdConfig,
+    carriers: Vec<Carrier>,
+    lights: Vec<PatternLight>,
+    width: usize,
+    height: usize,
+}
+
+impl Chain {
+    /// The chain for `carriers` seen by a `w × h` sensor, pattern i formed by `lights[i]`.
+    pub fn new(
+        cfg: &OpticsConfig,
+        carriers: &[Carrier],
+        lights: &[PatternLight],
+        w: usize,
+        h: usize,
+    ) -> Result<Chain> {
+        cfg.validate("optics")?;
+        if w < 2 || h < 2 {
+            return Err(Error::Shape(format!("sensor {w}×{h}: at least 2×2 pixels")));
+        }
+        if lights.len() != carriers.len() {
+            return Err(Error::Shape(format!(
+                "{} pattern lights for {} carriers",
+                lights.len(),
+                carriers.len()
+            )));
+        }
+        Ok(Chain {
+            cfg: cfg.clone(),
+            modulator: cfg.modulator(w, h),
+            carriers: carriers.to_vec(),
+            lights: lights.to_vec(),
+            width: w,
+            height: h,
+        })
+    }
+
+    pub fn config(&self) -> &OpticsConfig {
+        &self.cfg
+    }
+
+    /// The DMD, or the ideal grey modulator that stands in for it.
+    pub fn modulator(&self) -> &DmdConfig {
+        &self.modulator
+    }
+
+    /// The sensor's size in pixels.
+    pub fn sensor_size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Pattern `i` through every step.
+    fn image_one(&self, i: usize) -> Result<Imaged> {
+        let display = self.dither_one(i)?;
+        let relayed = relay(&self.cfg, &self.modulator, &display, &self.lights[i])?;
+        let image = lens(
+            self.cfg.lens.as_ref(),
+            &self.modulator,
+            &relayed,
+            &self.lights[i],
+        );
+        let imaged = pixel_sampling(&image, &self.carriers[i], self.width, self.height)?;
+        Ok(Imaged {
+            target: display.target,
+            display: display.shown,
+            imaged,
+            throughput: relayed.throughput,
+            mask: display.mask,
+            pad: relayed.grid.pad,
+            oversample: relayed.grid.oversample,
+        })
+    }
+
+    fn dither_one(&self, i: usize) -> Result<Display> {
+        let (c, light) = (&self.carriers[i], &self.lights[i]);
+        dither(
+            &self.cfg,
+            &self.modulator,
+            c,
+            light,
+            self.width,
+            self.height,
+        )
+    }
+
+    /// [`dither`] for every pattern.
+    pub fn dither(&self) -> Result<Vec<Display>> {
+        (0..self.carriers.len())
+            .map(|i| self.dither_one(i))
+            .collect()
+    }
+
+    /// [`relay_filtered`] for every pattern.
+    pub fn relay_filtered(
+        &self,
+        f: &FourierFilterConfig,
+        displays: &[Display],
+    ) -> Result<Vec<IntensitySpectrum>> {
+        let dmd = self.cfg.dmd.as_ref();
+        (displays.iter().zip(&self.lights))
+            .map(|(d, light)| relay_filtered(dmd, f, &self.modulator, d, light))
+            .collect()
+    }
+
+    /// [`relay_open`] for every pattern.
+    pub fn relay_open(&self, displays: &[Display]) -> Vec<IntensitySpectrum> {
+        let dmd = self.cfg.dmd.as_ref();
+        (displays.iter())
+            .map(|d| relay_open(dmd, &self.modulator, d))
+            .collect()
+    }
+
+    /// [`lens`] for every pattern (`None`: no lens, the relay's image unblurred).
+    pub fn lens(
+        &self,
+        lens_cfg: Option<&LensConfig>,
+        spectra: &[IntensitySpectrum],
+    ) -> Vec<ImageSpectrum> {
+        (spectra.iter().zip(&self.lights))
+            .map(|(s, light)| lens(lens_cfg, &self.modulator, s, light))
+            .collect()
+    }
+
+    /// [`pixel_sampling`] for every pattern: s̃, one plane per carrier.
+    pub fn pixel_sampling(&self, images: &[ImageSpectrum]) -> Result<Cube> {
+        let (w, h) = (self.width, self.height);
+        let mut out = Cube::zeros(w, h, self.carriers.len());
+        for (i, (image, c)) in images.iter().zip(&self.carriers).enumerate() {
+            out.plane_mut(i)
+                .copy_from_slice(&pixel_sampling(image, c, w, h)?);
+        }
+        Ok(out)
+    }
+}
+
+/// Everything one pattern's chain produced (for [`PatternSet`]).
 struct Imaged {
     target: Vec<f32>,
     display: Vec<f32>,
@@ -238,6 +395,8 @@ struct Imaged {
 
 /// Sensor ↔ mirror coordinates: the sensor's centre sits on the DMD's centre; sensor pixel x
 /// lies at mirror u = u_c + σ(x − x_c)/s (σ = −1 for an inverted image, s pixels per mirror).
+/// (fxd, fyd) is the carrier in cycles per mirror.
+#[derive(Clone, Copy, Debug)]
 struct Geometry {
     s: f64,
     sigma: f64,
@@ -245,6 +404,8 @@ struct Geometry {
     vc: f64,
     xc: f64,
     yc: f64,
+    fxd: f64,
+    fyd: f64,
 }
 
 impl Geometry {
@@ -262,19 +423,19 @@ impl Geometry {
     }
 }
 
-fn image_one(
-    cfg: &OpticsConfig,
+/// Where the `w × h` sensor's pixels fall on the modulator `m`, and carrier `c` in cycles per
+/// mirror; refuses a modulator that does not cover the sensor or a carrier past its Nyquist.
+fn geometry(
+    lens: Option<&LensConfig>,
     m: &DmdConfig,
     c: &Carrier,
-    light: &PatternLight,
     w: usize,
     h: usize,
-) -> Result<Imaged> {
+) -> Result<Geometry> {
     let (wd, hd) = (m.width, m.height);
-    let pitch = m.pitch_um;
-    let (s, sigma) = cfg.lens.as_ref().map_or((1.0, 1.0), |l| {
+    let (s, sigma) = lens.map_or((1.0, 1.0), |l| {
         (
-            l.sensor_pixels_per_mirror(pitch),
+            l.sensor_pixels_per_mirror(m.pitch_um),
             if l.inverted() { -1.0 } else { 1.0 },
         )
     });
@@ -286,15 +447,6 @@ fn image_one(
             &format!("the {w}×{h} sensor sees {:.1}×{:.1} mirrors at {s:.4} pixels per mirror; the DMD must cover it", w as f64 / s, h as f64 / s),
         ));
     }
-    let g = Geometry {
-        s,
-        sigma,
-        uc: (wd as f64 - 1.0) / 2.0,
-        vc: (hd as f64 - 1.0) / 2.0,
-        xc: (w as f64 - 1.0) / 2.0,
-        yc: (h as f64 - 1.0) / 2.0,
-    };
-    // The carrier in cycles per mirror.
     let (fxd, fyd) = (sigma * c.fx * s, sigma * c.fy * s);
     if fxd.abs() > 0.5 + 1e-12 || fyd.abs() > 0.5 + 1e-12 {
         return Err(Error::config(
@@ -304,193 +456,460 @@ fn image_one(
             &format!("carrier ({}, {}) cycles/pixel is ({fxd:.3}, {fyd:.3}) cycles/mirror, past the DMD's Nyquist limit", c.fx, c.fy),
         ));
     }
-    // Grey target s/2 on the mirrors, phase referenced to the sensor grid.
+    Ok(Geometry {
+        s,
+        sigma,
+        uc: (wd as f64 - 1.0) / 2.0,
+        vc: (hd as f64 - 1.0) / 2.0,
+        xc: (w as f64 - 1.0) / 2.0,
+        yc: (h as f64 - 1.0) / 2.0,
+        fxd,
+        fyd,
+    })
+}
+
+/// One pattern on the modulator: the grey target, what the mirrors show, and where they sit.
+pub struct Display {
+    /// The grey target s_i/2 on the mirror grid.
+    pub target: Vec<f32>,
+    /// What the modulator shows: the dithered binary pattern with a DMD, the target without.
+    pub shown: Vec<f32>,
+    /// The Fourier mask at the light's centroid, the passband the dither saw (None: no filter).
+    pub mask: Option<Mask>,
+    geometry: Geometry,
+}
+
+/// The grey target s_i/2 on the mirrors, phase referenced to the sensor grid.
+fn grey_target(m: &DmdConfig, g: &Geometry, c: &Carrier) -> Vec<f32> {
+    let (wd, hd) = (m.width, m.height);
     let tau = std::f64::consts::TAU;
-    let target: Vec<f32> = (0..wd * hd)
+    (0..wd * hd)
         .into_par_iter()
         .map(|p| {
             let (x, y) = g.sensor_of((p % wd) as f64, (p / wd) as f64);
             (0.5 + 0.5 * (tau * (c.fx * x + c.fy * y) + c.phase_rad).cos()) as f32
         })
-        .collect();
-    let filter = cfg.fourier_filter.as_ref();
-    let aperture = filter.map(|f| f.aperture(pitch, fxd, fyd, light));
-    let (l_short, l_long) = light.support_nm();
-    // The passband the dither sees: the mask at the light's centroid.
-    let mask = aperture
-        .as_ref()
-        .map(|a| a.at_wavelength(light.centroid_nm()));
+        .collect()
+}
+
+/// Target → what the modulator shows: the DMD dithers the grey target for the mask's passband
+/// at the light's centroid (the band the dither can shape); a grey modulator shows it as is.
+pub fn dither(
+    cfg: &OpticsConfig,
+    m: &DmdConfig,
+    c: &Carrier,
+    light: &PatternLight,
+    w: usize,
+    h: usize,
+) -> Result<Display> {
+    let geometry = geometry(cfg.lens.as_ref(), m, c, w, h)?;
+    let target = grey_target(m, &geometry, c);
+    let mask = cfg.fourier_filter.as_ref().map(|f| {
+        f.aperture(m.pitch_um, geometry.fxd, geometry.fyd, light)
+            .at_wavelength(light.centroid_nm())
+    });
     let passband = |fx: f64, fy: f64| mask.as_ref().map_or(1.0, |mk| mk.at_periodic(fx, fy));
-    let display = match &cfg.dmd {
+    let shown = match &cfg.dmd {
         Some(d) => d.display(&target, &passband),
         None => target.clone(),
     };
+    Ok(Display {
+        target,
+        shown,
+        mask,
+        geometry,
+    })
+}
 
-    // Grid: padding to resolve the openings at the longest wavelength (the smallest in
-    // frequency). The intensity is exact at the nodes of the simulation grid (its spectrum is
-    // folded onto it); when the sensor pixels fall between mirror nodes the grid is made
-    // `oversample` times finer than the mirrors, enough to hold the intensity's band (twice the
-    // openings' reach at the shortest wavelength) for the interpolation.
-    let on_node = s == 1.0
+/// The simulation grid of one pattern: the `wd × hd` mirror grid zero-padded `pad` times (to
+/// resolve the openings) and sampled `oversample` times finer (to hold the intensity's band).
+#[derive(Clone, Copy, Debug)]
+pub struct Grid {
+    pub pad: usize,
+    pub oversample: usize,
+    /// How far the openings reach, cycles per mirror (½ without a filter).
+    reach: f64,
+    wd: usize,
+    hd: usize,
+}
+
+impl Grid {
+    /// The mirror grid itself: no filter, nothing to resolve.
+    fn mirrors(m: &DmdConfig) -> Grid {
+        Grid {
+            pad: 1,
+            oversample: 1,
+            reach: 0.5,
+            wd: m.width,
+            hd: m.height,
+        }
+    }
+    /// The padded mirror grid, on which the relay's spectra are computed.
+    fn coarse(&self) -> (usize, usize) {
+        (self.pad * self.wd, self.pad * self.hd)
+    }
+    /// The oversampled grid, on which the image is formed.
+    fn fine(&self) -> (usize, usize) {
+        let (wc, hc) = self.coarse();
+        (self.oversample * wc, self.oversample * hc)
+    }
+}
+
+/// The grid an aperture needs: padded to resolve the openings at the longest wavelength (the
+/// smallest in frequency). The intensity is exact at the grid's nodes (its spectrum is folded
+/// onto it); when the sensor pixels fall between mirror nodes the grid is made `oversample`
+/// times finer, enough to hold the intensity's band (twice the openings' reach at the shortest
+/// wavelength) for the interpolation. Refused past [`MAX_GRID`], naming the pinhole radius.
+fn grid(
+    dmd: bool,
+    m: &DmdConfig,
+    g: &Geometry,
+    ap: &Aperture,
+    light: &PatternLight,
+) -> Result<Grid> {
+    let (wd, hd) = (m.width, m.height);
+    let (l_short, l_long) = light.support_nm();
+    let on_node = g.s == 1.0
         && [g.mirror_of(0.0, 0.0), g.mirror_of(1.0, 1.0)]
             .iter()
             .all(|&(u, v)| u.fract() == 0.0 && v.fract() == 0.0);
-    let (pad, oversample, reach) = match &aperture {
-        None => (1, 1, 0.5),
-        Some(ap) => {
-            let bins = ap.at_wavelength(l_long).radius * wd.min(hd) as f64;
-            let pad = (MIN_PINHOLE_BINS / bins).ceil().max(1.0);
-            let (ex, ey) = ap.at_wavelength(l_short).extent();
-            // A grey modulator has no replicas: nothing beyond its Nyquist band.
-            let reach = if cfg.dmd.is_some() {
-                ex.max(ey)
-            } else {
-                ex.max(ey).min(0.5)
-            };
-            let os = if on_node {
-                1.0
-            } else {
-                (4.0 * reach).floor() + 1.0
-            };
-            let side = pad * os * wd.max(hd) as f64;
-            if !side.is_finite() || side > MAX_GRID as f64 {
-                return Err(Error::config(
-                    "optics",
-                    "rig.fourier_filter.pinhole_radius_um",
-                    ap.radius_um,
-                    &format!(
-                        "an opening of {:.2} frequency bins (reaching {reach:.3} cycles/mirror) needs a {}-fold padded, {}-fold oversampled grid of {side} > {MAX_GRID} samples; an opening must span at least 4 bins (widen it or use fewer mirrors) and reach well below 2 cycles/mirror",
-                        bins, pad, os
-                    ),
-                ));
-            }
-            (pad as usize, os as usize, reach)
-        }
+    let bins = ap.at_wavelength(l_long).radius * wd.min(hd) as f64;
+    let pad = (MIN_PINHOLE_BINS / bins).ceil().max(1.0);
+    let (ex, ey) = ap.at_wavelength(l_short).extent();
+    // A grey modulator has no replicas: nothing beyond its Nyquist band.
+    let reach = if dmd { ex.max(ey) } else { ex.max(ey).min(0.5) };
+    let os = if on_node {
+        1.0
+    } else {
+        (4.0 * reach).floor() + 1.0
     };
-    let (wc, hc) = (pad * wd, pad * hd);
-    let (wf, hf) = (oversample * wc, oversample * hc);
-    let coherent = filter.map(|f| f.illumination == Illumination::Coherent);
-    // Coherent light is filtered as a field: amplitude √intensity (binary: itself).
-    let mut padded = vec![0.0f32; wc * hc];
-    for (row, src) in padded.chunks_exact_mut(wc).zip(display.chunks_exact(wd)) {
-        for (d, &v) in row.iter_mut().zip(src) {
-            *d = if coherent == Some(true) { v.sqrt() } else { v };
+    let side = pad * os * wd.max(hd) as f64;
+    if !side.is_finite() || side > MAX_GRID as f64 {
+        return Err(Error::config(
+            "optics",
+            "rig.fourier_filter.pinhole_radius_um",
+            ap.radius_um,
+            &format!(
+                "an opening of {:.2} frequency bins (reaching {reach:.3} cycles/mirror) needs a {}-fold padded, {}-fold oversampled grid of {side} > {MAX_GRID} samples; an opening must span at least 4 bins (widen it or use fewer mirrors) and reach well below 2 cycles/mirror",
+                bins, pad, os
+            ),
+        ));
+    }
+    Ok(Grid {
+        pad: pad as usize,
+        oversample: os as usize,
+        reach,
+        wd,
+        hd,
+    })
+}
+
+/// The modulator's spectrum on the padded mirror grid: B(f mod 1)·envelope with a DMD, the
+/// band-limited target without; for coherent light, of the field (amplitude √intensity).
+struct ModulatorSpectrum {
+    coarse: HalfSpectrum,
+    dmd: Option<DmdConfig>,
+    wc: usize,
+    hc: usize,
+}
+
+impl ModulatorSpectrum {
+    /// The FFT of what the modulator shows, zero-padded onto the grid's coarse size.
+    fn new(
+        dmd: Option<&DmdConfig>,
+        display: &Display,
+        grid: &Grid,
+        coherent: bool,
+    ) -> ModulatorSpectrum {
+        let (wc, hc) = grid.coarse();
+        let mut padded = vec![0.0f32; wc * hc];
+        for (row, src) in padded
+            .chunks_exact_mut(wc)
+            .zip(display.shown.chunks_exact(grid.wd))
+        {
+            for (d, &v) in row.iter_mut().zip(src) {
+                *d = if coherent { v.sqrt() } else { v };
+            }
+        }
+        ModulatorSpectrum {
+            coarse: Fft2::new(wc, hc).forward(&padded),
+            dmd: dmd.cloned(),
+            wc,
+            hc,
         }
     }
-    let coarse = Fft2::new(wc, hc).forward(&padded);
-    let fine = Fft2::new(wf, hf);
-    // A grey modulator's band-limited spectrum. Its Nyquist component is a real cosine: on the
-    // frequency lattice of the mask (where ±½ are two points) each half gets half of it; on the
-    // grid of the unfiltered path (one bin for both) it is whole.
-    let nyquist = |k: i64, n: usize, split: f64| -> f64 {
-        match (2 * k.unsigned_abs() as usize).cmp(&n) {
-            std::cmp::Ordering::Less => 1.0,
-            std::cmp::Ordering::Equal => split,
-            std::cmp::Ordering::Greater => 0.0,
-        }
-    };
-    // The modulator's spectrum at bin (kx, ky), f = (kx/wc, ky/hc): B(f mod 1)·envelope with a
-    // DMD, the band-limited target without.
-    let spectrum_at = |kx: i64, ky: i64, split: f64| -> Complex64 {
-        let v = coarse.at(kx, ky);
+
+    /// The spectrum at bin (kx, ky), f = (kx/wc, ky/hc). A grey modulator's Nyquist component
+    /// is a real cosine: on the frequency lattice of the mask (where ±½ are two points) each
+    /// half gets `split` = ½ of it; on the grid of the unfiltered path (one bin) it is whole.
+    fn at(&self, kx: i64, ky: i64, split: f64) -> Complex64 {
+        let v = self.coarse.at(kx, ky);
         let v = Complex64::new(v.re as f64, v.im as f64);
-        match &cfg.dmd {
-            Some(d) => v * d.mirror_envelope(kx as f64 / wc as f64, ky as f64 / hc as f64),
-            None => v * nyquist(kx, wc, split) * nyquist(ky, hc, split),
+        match &self.dmd {
+            Some(d) => {
+                v * d.mirror_envelope(kx as f64 / self.wc as f64, ky as f64 / self.hc as f64)
+            }
+            None => v * nyquist(kx, self.wc, split) * nyquist(ky, self.hc, split),
         }
+    }
+
+    /// The spectrum the mask sees (the Nyquist component split between ±½).
+    fn source(&self, kx: i64, ky: i64) -> Complex64 {
+        self.at(kx, ky, 0.5)
+    }
+}
+
+/// A band-limited grid's share of bin k of n: inside the band 1, at Nyquist `split`, past it 0.
+fn nyquist(k: i64, n: usize, split: f64) -> f64 {
+    match (2 * k.unsigned_abs() as usize).cmp(&n) {
+        std::cmp::Ordering::Less => 1.0,
+        std::cmp::Ordering::Equal => split,
+        std::cmp::Ordering::Greater => 0.0,
+    }
+}
+
+/// The intensity past the 4f relay, as spectra on the padded mirror grid.
+pub struct IntensitySpectrum {
+    /// Light passed by the mask (1 without a filter), see [`PatternSet::throughput`].
+    pub throughput: f64,
+    grid: Grid,
+    geometry: Geometry,
+    relayed: Relayed,
+}
+
+/// What the relay passes, before the lens.
+enum Relayed {
+    /// Past a Fourier filter: the moment spectra s0, s1 of the passed bins' pairs (relay/).
+    /// For incoherent light they are the mask's OTF, which multiplies the modulator's spectrum.
+    Filtered {
+        sums: PairSums,
+        incoherent_source: Option<ModulatorSpectrum>,
+    },
+    /// No filter: the modulator's own band-limited spectrum.
+    Open(ModulatorSpectrum),
+}
+
+/// The relay with the experiment's Fourier filter, or the open relay without one.
+pub fn relay(
+    cfg: &OpticsConfig,
+    m: &DmdConfig,
+    display: &Display,
+    light: &PatternLight,
+) -> Result<IntensitySpectrum> {
+    match &cfg.fourier_filter {
+        Some(f) => relay_filtered(cfg.dmd.as_ref(), f, m, display, light),
+        None => Ok(relay_open(cfg.dmd.as_ref(), m, display)),
+    }
+}
+
+/// The intensity spectrum past the Fourier mask: the moment spectra s0, s1 of the pairs of
+/// bins the openings pass (exact over the light's wavelengths), and the share of light passed.
+pub fn relay_filtered(
+    dmd: Option<&DmdConfig>,
+    f: &FourierFilterConfig,
+    m: &DmdConfig,
+    display: &Display,
+    light: &PatternLight,
+) -> Result<IntensitySpectrum> {
+    let g = display.geometry;
+    let ap = f.aperture(m.pitch_um, g.fxd, g.fyd, light);
+    let grid = grid(dmd.is_some(), m, &g, &ap, light)?;
+    let coherent = f.illumination == Illumination::Coherent;
+    let spectrum = ModulatorSpectrum::new(dmd, display, &grid, coherent);
+    let bins = passed_bins(&ap, light, f.illumination, grid.coarse(), |kx, ky| {
+        spectrum.source(kx, ky)
+    })?;
+    let sums = pair_sums(&bins);
+    let throughput = if coherent {
+        coherent_throughput(&bins, &spectrum, &grid)
+    } else {
+        incoherent_throughput(&bins, &grid)
     };
-    let source = |kx: i64, ky: i64| spectrum_at(kx, ky, 0.5);
-    // The lens (per wavelength: its OTF at the centroid and its slope) and the pixel box.
-    let centroid = light.centroid_nm();
-    let lens = |kx: i64, ky: i64| -> [f64; 2] {
-        let (fx, fy) = (kx as f64 / wc as f64, ky as f64 / hc as f64);
-        cfg.lens.as_ref().map_or([1.0, 0.0], |l| {
-            let px = l.pixel_transfer(pitch, fx, fy);
+    Ok(IntensitySpectrum {
+        throughput,
+        grid,
+        geometry: g,
+        relayed: Relayed::Filtered {
+            sums,
+            incoherent_source: (!coherent).then_some(spectrum),
+        },
+    })
+}
+
+/// Without a filter the relay passes the modulator's whole band-limited spectrum.
+pub fn relay_open(dmd: Option<&DmdConfig>, m: &DmdConfig, display: &Display) -> IntensitySpectrum {
+    let grid = Grid::mirrors(m);
+    IntensitySpectrum {
+        throughput: 1.0,
+        grid,
+        geometry: display.geometry,
+        relayed: Relayed::Open(ModulatorSpectrum::new(dmd, display, &grid, false)),
+    }
+}
+
+/// Coherent throughput: the passed share, over the light, of the field's energy at frequencies
+/// up to the openings' reach (at least the mirror grid's band).
+fn coherent_throughput(bins: &[PassedBin], source: &ModulatorSpectrum, grid: &Grid) -> f64 {
+    let (wc, hc) = grid.coarse();
+    let k = |n: usize| (grid.reach.max(0.5) * n as f64).floor() as i64;
+    let (kx, ky) = (k(wc), k(hc));
+    let all: f64 = (-kx..=kx)
+        .into_par_iter()
+        .map(|qx| {
+            (-ky..=ky)
+                .map(|qy| source.source(qx, qy).norm_sqr())
+                .sum::<f64>()
+        })
+        .sum();
+    let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();
+    passed / all.max(f64::MIN_POSITIVE)
+}
+
+/// Incoherent throughput: the open share of the mirror grid's band, over the light.
+fn incoherent_throughput(bins: &[PassedBin], grid: &Grid) -> f64 {
+    let (wc, hc) = grid.coarse();
+    let band = |k: i64, n: usize| 2 * k >= -(n as i64) && 2 * k < n as i64;
+    let open: f64 = bins
+        .iter()
+        .filter(|b| band(b.kx, wc) && band(b.ky, hc))
+        .map(|b| b.weight)
+        .sum();
+    open / (wc * hc) as f64
+}
+
+/// The lens at bin (kx, ky) of the padded mirror grid: its Airy OTF at the light's centroid and
+/// the OTF's slope over wavelength, each times the pixel box; [1, 0] without a lens.
+struct LensOtf<'a> {
+    lens: Option<&'a LensConfig>,
+    pitch: f64,
+    centroid: f64,
+    wc: usize,
+    hc: usize,
+}
+
+impl LensOtf<'_> {
+    fn at(&self, kx: i64, ky: i64) -> [f64; 2] {
+        let (fx, fy) = (kx as f64 / self.wc as f64, ky as f64 / self.hc as f64);
+        self.lens.map_or([1.0, 0.0], |l| {
+            let px = l.pixel_transfer(self.pitch, fx, fy);
             [
-                l.airy(pitch, fx, fy, centroid) * px,
-                l.airy_slope(pitch, fx, fy, centroid) * px,
+                l.airy(self.pitch, fx, fy, self.centroid) * px,
+                l.airy_slope(self.pitch, fx, fy, self.centroid) * px,
             ]
         })
+    }
+}
+
+/// The image's spectrum on the oversampled grid's half plane, ready for the inverse FFT.
+pub struct ImageSpectrum {
+    grid: Grid,
+    geometry: Geometry,
+    half: Vec<Complex32>,
+}
+
+/// The image on the sample: the relay's moment spectra combined with the lens OTF (per
+/// wavelength, to first order about the centroid) and the pixel box; `None`: no lens, unblurred.
+pub fn lens(
+    lens: Option<&LensConfig>,
+    m: &DmdConfig,
+    spectrum: &IntensitySpectrum,
+    light: &PatternLight,
+) -> ImageSpectrum {
+    let (wc, hc) = spectrum.grid.coarse();
+    let otf = LensOtf {
+        lens,
+        pitch: m.pitch_um,
+        centroid: light.centroid_nm(),
+        wc,
+        hc,
     };
-    let mut spec = vec![Complex32::default(); (wf / 2 + 1) * hf];
-    let throughput = match (&aperture, filter) {
-        (Some(ap), Some(f)) => {
-            let bins = passed_bins(ap, light, f.illumination, (wc, hc), source)?;
-            let sums = pair_sums(&bins);
-            // Î(q) through the lens for q with qx ≥ 0, then folded onto the grid's torus with
-            // Î(−q) = Î(q)* (sampling on the grid's nodes is exact for the folded spectrum).
-            let (rx, ry) = sums.reach();
-            let values: Vec<Vec<Complex64>> = (0..=rx)
-                .into_par_iter()
-                .map(|qx| {
-                    (-ry..=ry)
-                        .map(|qy| {
-                            let [s0, s1] = sums.at(qx, qy);
-                            if s0 == Complex64::default() && s1 == Complex64::default() {
-                                return s0;
-                            }
-                            let [l0, l1] = lens(qx, qy);
-                            let x = s0 * l0 + s1 * l1;
-                            if coherent == Some(true) {
-                                x
-                            } else {
-                                x * source(qx, qy)
-                            }
-                        })
-                        .collect()
-                })
-                .collect();
-            let mut torus = vec![Complex64::default(); wf * hf];
-            let at = |qx: i64, qy: i64| {
-                qx.rem_euclid(wf as i64) as usize * hf + qy.rem_euclid(hf as i64) as usize
-            };
-            for (qx, col) in (0..).zip(&values) {
-                for (qy, &x) in (-ry..).zip(col) {
-                    torus[at(qx, qy)] += x;
-                    if qx > 0 {
-                        torus[at(-qx, -qy)] += x.conj();
+    let half = match &spectrum.relayed {
+        Relayed::Filtered {
+            sums,
+            incoherent_source,
+        } => fold_moments(sums, incoherent_source.as_ref(), &otf, &spectrum.grid),
+        Relayed::Open(modulator) => open_image(modulator, &otf, &spectrum.grid),
+    };
+    ImageSpectrum {
+        grid: spectrum.grid,
+        geometry: spectrum.geometry,
+        half,
+    }
+}
+
+/// Î(q) = s0·OTF + s1·∂OTF (times the source for incoherent light) for q with qx ≥ 0, folded
+/// onto the grid's torus with Î(−q) = Î(q)* (sampling on the nodes is exact for the folded
+/// spectrum).
+fn fold_moments(
+    sums: &PairSums,
+    source: Option<&ModulatorSpectrum>,
+    otf: &LensOtf,
+    grid: &Grid,
+) -> Vec<Complex32> {
+    let (wf, hf) = grid.fine();
+    let (rx, ry) = sums.reach();
+    let values: Vec<Vec<Complex64>> = (0..=rx)
+        .into_par_iter()
+        .map(|qx| {
+            (-ry..=ry)
+                .map(|qy| {
+                    let [s0, s1] = sums.at(qx, qy);
+                    if s0 == Complex64::default() && s1 == Complex64::default() {
+                        return s0;
                     }
-                }
-            }
-            for (v, t) in spec.iter_mut().zip(&torus) {
-                *v = Complex32::new(t.re as f32, t.im as f32);
-            }
-            if coherent == Some(true) {
-                // The passed share, over the light, of the field's energy at frequencies up
-                // to the openings' reach (at least the mirror grid's band).
-                let k = |n: usize| (reach.max(0.5) * n as f64).floor() as i64;
-                let (kx, ky) = (k(wc), k(hc));
-                let all: f64 = (-kx..=kx)
-                    .into_par_iter()
-                    .map(|qx| (-ky..=ky).map(|qy| source(qx, qy).norm_sqr()).sum::<f64>())
-                    .sum();
-                let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();
-                passed / all.max(f64::MIN_POSITIVE)
-            } else {
-                // The open share of the mirror grid's band, over the light.
-                let band = |k: i64, n: usize| 2 * k >= -(n as i64) && 2 * k < n as i64;
-                let open: f64 = bins
-                    .iter()
-                    .filter(|b| band(b.kx, wc) && band(b.ky, hc))
-                    .map(|b| b.weight)
-                    .sum();
-                open / (wc * hc) as f64
-            }
-        }
-        _ => {
-            spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
-                for (i, v) in col.iter_mut().enumerate() {
-                    let (kx, ky) = (kx as i64, signed_bin(i, hf));
-                    let x = spectrum_at(kx, ky, 1.0) * lens(kx, ky)[0];
-                    *v = Complex32::new(x.re as f32, x.im as f32);
-                }
-            });
-            1.0
-        }
+                    let [l0, l1] = otf.at(qx, qy);
+                    let x = s0 * l0 + s1 * l1;
+                    source.map_or(x, |s| x * s.source(qx, qy))
+                })
+                .collect()
+        })
+        .collect();
+    let mut torus = vec![Complex64::default(); wf * hf];
+    let at = |qx: i64, qy: i64| {
+        qx.rem_euclid(wf as i64) as usize * hf + qy.rem_euclid(hf as i64) as usize
     };
-    let field = fine.inverse(&spec);
-    // Sample at the sensor pixels (fine sample j sits at mirror coordinate j / oversample).
-    let os = oversample as f64;
+    for (qx, col) in (0..).zip(&values) {
+        for (qy, &x) in (-ry..).zip(col) {
+            torus[at(qx, qy)] += x;
+            if qx > 0 {
+                torus[at(-qx, -qy)] += x.conj();
+            }
+        }
+    }
+    torus[..(wf / 2 + 1) * hf]
+        .iter()
+        .map(|t| Complex32::new(t.re as f32, t.im as f32))
+        .collect()
+}
+
+/// Without a filter: the modulator's spectrum (Nyquist bins whole) times the lens OTF.
+fn open_image(modulator: &ModulatorSpectrum, otf: &LensOtf, grid: &Grid) -> Vec<Complex32> {
+    let (wf, hf) = grid.fine();
+    let mut spec = vec![Complex32::default(); (wf / 2 + 1) * hf];
+    spec.par_chunks_mut(hf).enumerate().for_each(|(kx, col)| {
+        for (i, v) in col.iter_mut().enumerate() {
+            let (kx, ky) = (kx as i64, signed_bin(i, hf));
+            let x = modulator.at(kx, ky, 1.0) * otf.at(kx, ky)[0];
+            *v = Complex32::new(x.re as f32, x.im as f32);
+        }
+    });
+    spec
+}
+
+/// The pattern at the sensor pixels: the image back from the Fourier domain, Keys-cubic
+/// resampled at each pixel's place on the grid, normalised by its mean (see the module doc).
+pub fn pixel_sampling(image: &ImageSpectrum, c: &Carrier, w: usize, h: usize) -> Result<Vec<f32>> {
+    let (wf, hf) = image.grid.fine();
+    let field = Fft2::new(wf, hf).inverse(&image.half);
+    let out = resample(&field, image, w, h);
+    normalise(out, c, w, h)
+}
+
+/// Keys cubic interpolation of the image `field` on the fine grid at the sensor pixels (fine
+/// sample j sits at mirror coordinate j / oversample, periodic).
+fn resample(field: &[f32], image: &ImageSpectrum, w: usize, h: usize) -> Vec<f32> {
+    let (wf, hf) = image.grid.fine();
+    let (g, os) = (&image.geometry, image.grid.oversample as f64);
     let xs: Vec<(i64, [f64; 4])> = (0..w)
         .map(|x| keys(os * g.mirror_of(x as f64, 0.0).0))
         .collect();
@@ -516,7 +935,12 @@ fn image_one(
             *o = acc as f32;
         }
     });
-    // Normalise by the mean: s̃ = I · mean(ideal)/mean(I).
+    out
+}
+
+/// s̃ = I · mean(ideal)/mean(I): the pattern's scale is the design's, whatever light was lost;
+/// refused when no light reaches the sensor.
+fn normalise(mut out: Vec<f32>, c: &Carrier, w: usize, h: usize) -> Result<Vec<f32>> {
     let ideal = c.ideal_pattern(w, h);
     let mean = |v: &[f32]| v.iter().map(|&a| a as f64).sum::<f64>() / v.len() as f64;
     let (mi, mo) = (mean(&ideal), mean(&out));
@@ -528,15 +952,7 @@ fn image_one(
     }
     let k = (mi / mo) as f32;
     out.iter_mut().for_each(|v| *v *= k);
-    Ok(Imaged {
-        target,
-        display,
-        imaged: out,
-        throughput,
-        mask,
-        pad,
-        oversample,
-    })
+    Ok(out)
 }
 
 /// Keys cubic convolution (a = −½) at fractional position `t`: base index and the four weights

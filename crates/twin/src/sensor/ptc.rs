@@ -114,6 +114,44 @@ pub fn default_levels(full_well_e: f64) -> Vec<f64> {
 /// Run the EMVA 1288 photon-transfer measurement at mean photo-electron `levels` (before PRNU).
 /// The levels must climb past saturation so that the variance curve has its maximum inside.
 pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {
+    let levels = checked_levels(levels)?;
+    let pixels = sensor.width * sensor.height;
+    if pixels < 2 {
+        return Err(Error::Shape(
+            "photon transfer needs at least two pixels".into(),
+        ));
+    }
+    let (dark, points) = curve(sensor, &levels);
+    let sat = saturation(&points)?;
+    let sat_signal = points[sat].mean_dn - dark.mean_dn;
+    let fit = fit_gain(&points, &dark, sat_signal, pixels)?;
+    let k = fit.k;
+    let nu = nonuniformities(sensor, &points, &dark, sat, sat_signal)?;
+    let (dark_mean, dark_var) = (dark.mean_dn, dark.variance_dn2);
+    Ok(PtcResult {
+        k_dn_per_e: k,
+        k_stderr_dn_per_e: fit.var_k.sqrt(),
+        fit_offset_dn2: fit.offset_dn2,
+        fit_max_signal_dn: fit.max_signal_dn,
+        read_noise_e: (dark_var - QUANTISATION_VARIANCE_DN2).max(0.0).sqrt() / k,
+        quantisation_limited: dark_var < QUANTISATION_LIMIT_DN2,
+        full_well_e: sat_signal / k,
+        saturation_mean_dn: points[sat].mean_dn,
+        dark_mean_dn: dark_mean,
+        dark_variance_dn2: dark_var,
+        prnu_fraction: (nu.s2_half - nu.s2_dark).max(0.0).sqrt()
+            / (nu.flat_mean - nu.dark_avg_mean),
+        dsnu_e: nu.s2_dark.max(0.0).sqrt() / k,
+        prnu_level_e: points[nu.half].level_e,
+        nonuniformity_frames: NONUNIFORMITY_FRAMES,
+        pixels,
+        points,
+    })
+}
+
+/// The levels sorted and deduplicated; refuses a level that is not finite and positive, and
+/// fewer than 5 distinct levels (a line through the linear range needs them).
+fn checked_levels(levels: &[f64]) -> Result<Vec<f64>> {
     if let Some(v) = levels.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
         return Err(Error::Numerical(format!(
             "photon transfer: level {v} e⁻; levels must be finite and > 0 (the dark pair is taken anyway)"
@@ -128,36 +166,36 @@ pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {
             levels.len()
         )));
     }
-    let pixels = sensor.width * sensor.height;
-    if pixels < 2 {
-        return Err(Error::Shape(
-            "photon transfer needs at least two pixels".into(),
-        ));
-    }
-    let zeros = vec![0f32; pixels];
-    let pair = |index: u64, mean_e: &[f32]| {
-        let a = sensor.expose(mean_e, Stream::PhotonTransfer, 2 * index);
-        let b = sensor.expose(mean_e, Stream::PhotonTransfer, 2 * index + 1);
-        pair_statistics(&a, &b)
-    };
-    let (dark_mean, dark_var) = pair(0, &zeros);
-    let points: Vec<PtcPoint> = levels
-        .iter()
-        .enumerate()
-        .map(|(i, &level)| {
-            let (mean_dn, variance_dn2) = pair(i as u64 + 1, &vec![level as f32; pixels]);
-            PtcPoint {
-                level_e: level,
-                mean_dn,
-                variance_dn2,
-            }
-        })
-        .collect();
+    Ok(levels)
+}
 
-    // Saturation: the maximum of the variance curve, which must lie inside the series.
+/// The dark pair and one pair of flat frames per level, each reduced to its mean and temporal
+/// variance (pair i on its own noise stream, so the draws do not depend on the other levels).
+fn curve(sensor: &Sensor, levels: &[f64]) -> (PtcPoint, Vec<PtcPoint>) {
+    let pixels = sensor.width * sensor.height;
+    let pair = |index: u64, level_e: f64| {
+        let mean_e = vec![level_e as f32; pixels];
+        let a = sensor.expose(&mean_e, Stream::PhotonTransfer, 2 * index);
+        let b = sensor.expose(&mean_e, Stream::PhotonTransfer, 2 * index + 1);
+        let (mean_dn, variance_dn2) = pair_statistics(&a, &b);
+        PtcPoint {
+            level_e,
+            mean_dn,
+            variance_dn2,
+        }
+    };
+    let dark = pair(0, 0.0);
+    let points = (levels.iter().enumerate())
+        .map(|(i, &level)| pair(i as u64 + 1, level))
+        .collect();
+    (dark, points)
+}
+
+/// Saturation: the index of the variance curve's maximum, which must lie inside the series.
+fn saturation(points: &[PtcPoint]) -> Result<usize> {
     let sat = (0..points.len())
         .max_by(|&i, &j| points[i].variance_dn2.total_cmp(&points[j].variance_dn2))
-        .expect("at least five points");
+        .ok_or_else(|| Error::Numerical("photon transfer: no light level".into()))?;
     if sat + 1 == points.len() {
         return Err(Error::Numerical(format!(
             "photon transfer: the variance still rises at the brightest level ({} e⁻); add levels \
@@ -165,16 +203,34 @@ pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {
             points[sat].level_e
         )));
     }
-    let sat_signal = points[sat].mean_dn - dark_mean;
+    Ok(sat)
+}
 
-    // K: least squares of y = σ_y² − σ_y.dark² on x = μ_y − μ_y.dark over 0 … 70 % saturation.
+/// The fitted line σ_y² − σ_y.dark² = K·(μ_y − μ_y.dark) + offset.
+struct GainFit {
+    k: f64,
+    /// Sampling variance of K.
+    var_k: f64,
+    offset_dn2: f64,
+    /// Upper end of the fit range, μ_y − μ_y.dark (DN).
+    max_signal_dn: f64,
+}
+
+/// K: least squares of y = σ_y² − σ_y.dark² on x = μ_y − μ_y.dark over 0 … 70 % of saturation,
+/// with its standard error from the sampling variance of each σ_y².
+fn fit_gain(
+    points: &[PtcPoint],
+    dark: &PtcPoint,
+    sat_signal: f64,
+    pixels: usize,
+) -> Result<GainFit> {
     let fit_max = FIT_RANGE_FRACTION * sat_signal;
     let fit: Vec<(f64, f64, f64)> = points
         .iter()
         .map(|p| {
             (
-                p.mean_dn - dark_mean,
-                p.variance_dn2 - dark_var,
+                p.mean_dn - dark.mean_dn,
+                p.variance_dn2 - dark.variance_dn2,
                 p.variance_dn2,
             )
         })
@@ -206,36 +262,49 @@ pub fn photon_transfer(sensor: &Sensor, levels: &[f64]) -> Result<PtcResult> {
         .map(|f| (f.0 - x_mean).powi(2) * 2.0 * f.2.powi(2) / (pixels as f64 - 1.0))
         .sum::<f64>()
         / (sxx * sxx);
+    Ok(GainFit {
+        k,
+        var_k,
+        offset_dn2: y_mean - k * x_mean,
+        max_signal_dn: fit_max,
+    })
+}
 
-    // Non-uniformities from averaged frames, the temporal part σ_y²/L taken out.
+/// Spatial statistics of averaged dark and flat frames, for DSNU and PRNU.
+struct Nonuniformities {
+    dark_avg_mean: f64,
+    /// s_y.dark²: the dark frame's spatial variance, its temporal part σ_y²/L taken out.
+    s2_dark: f64,
+    /// The level nearest 50 % saturation, and the flat frame's mean and spatial variance there.
+    half: usize,
+    flat_mean: f64,
+    s2_half: f64,
+}
+
+/// Non-uniformities from frames averaged over [`NONUNIFORMITY_FRAMES`], dark and at the level
+/// nearest 50 % of saturation, the temporal part σ_y²/L taken out.
+fn nonuniformities(
+    sensor: &Sensor,
+    points: &[PtcPoint],
+    dark: &PtcPoint,
+    sat: usize,
+    sat_signal: f64,
+) -> Result<Nonuniformities> {
     let l = NONUNIFORMITY_FRAMES;
     let (dark_avg_mean, dark_avg_var) = spatial_statistics(&sensor.dark_frame(l)?);
-    let s2_dark = dark_avg_var - dark_var / l as f64;
+    let s2_dark = dark_avg_var - dark.variance_dn2 / l as f64;
     let half = (0..sat)
         .min_by(|&i, &j| {
-            let d = |p: &PtcPoint| (p.mean_dn - dark_mean - 0.5 * sat_signal).abs();
+            let d = |p: &PtcPoint| (p.mean_dn - dark.mean_dn - 0.5 * sat_signal).abs();
             d(&points[i]).total_cmp(&d(&points[j]))
         })
         .unwrap_or(0);
     let (flat_mean, flat_var) = spatial_statistics(&sensor.flat_frame(points[half].level_e, l)?);
-    let s2_half = flat_var - points[half].variance_dn2 / l as f64;
-
-    Ok(PtcResult {
-        k_dn_per_e: k,
-        k_stderr_dn_per_e: var_k.sqrt(),
-        fit_offset_dn2: y_mean - k * x_mean,
-        fit_max_signal_dn: fit_max,
-        read_noise_e: (dark_var - QUANTISATION_VARIANCE_DN2).max(0.0).sqrt() / k,
-        quantisation_limited: dark_var < QUANTISATION_LIMIT_DN2,
-        full_well_e: sat_signal / k,
-        saturation_mean_dn: points[sat].mean_dn,
-        dark_mean_dn: dark_mean,
-        dark_variance_dn2: dark_var,
-        prnu_fraction: (s2_half - s2_dark).max(0.0).sqrt() / (flat_mean - dark_avg_mean),
-        dsnu_e: s2_dark.max(0.0).sqrt() / k,
-        prnu_level_e: points[half].level_e,
-        nonuniformity_frames: l,
-        pixels,
-        points,
+    Ok(Nonuniformities {
+        dark_avg_mean,
+        s2_dark,
+        half,
+        flat_mean,
+        s2_half: flat_var - points[half].variance_dn2 / l as f64,
     })
 }
