@@ -51,10 +51,14 @@ impl Materials {
     }
 }
 
-/// The experiment's band grid.
-
 /// Build the experiment's scene: a procedural one from held-out materials, or an EXR cube.
 pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Scene> {
+    build_at(cfg, file, materials, 0.0)
+}
+
+/// The scene at time `t_s` (s): moving objects shifted by `velocity_px_per_s`·t; a still
+/// scene is the same at every time.
+pub fn build_at(cfg: &SceneConfig, file: &str, materials: &Materials, t_s: f64) -> Result<Scene> {
     let grid = cfg.grid(file)?;
     let [w, h] = cfg.size;
     let spectra: Vec<Vec<f32>> = materials
@@ -70,7 +74,8 @@ pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Sce
         }
         "shaded-objects" => {
             // The background is black velvet: a flat 2 % reflectance.
-            let s = shaded::spheres(w, h, spectra.len(), cfg.seed);
+            let [vx, vy] = cfg.velocity_px_per_s;
+            let s = shaded::spheres_at(w, h, spectra.len(), cfg.seed, [vx * t_s, vy * t_s]);
             let refl = |m: Option<u32>, b: usize| m.map_or(0.02, |m| spectra[m as usize][b]);
             paint(w, h, grid.count, |b, p| {
                 let (m1, w1, m2, w2) = s.layers[p];
