@@ -234,7 +234,9 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
         } => commands::reconstruct(&frame, experiment.as_deref(), truth.as_deref(), &out, lib),
         Command::Rehearse(a) => return controller::rehearse(&a.into(), lib),
-        Command::Acquire { run, backend } => return controller::acquire(&backend, &run.into(), lib),
+        Command::Acquire { run, backend } => {
+            return controller::acquire(&backend, &run.into(), lib)
+        }
     };
     done.map_err(|e| e.to_string())
 }

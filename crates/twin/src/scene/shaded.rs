@@ -103,7 +103,10 @@ mod tests {
 
     #[test]
     fn moved_spheres_are_the_same_spheres_shifted() {
-        let (a, b) = (spheres(64, 64, 10, 3), spheres_at(64, 64, 10, 3, [5.0, -2.0]));
+        let (a, b) = (
+            spheres(64, 64, 10, 3),
+            spheres_at(64, 64, 10, 3, [5.0, -2.0]),
+        );
         // A pixel of the still scene reappears 5 px right and 2 px up, away from the edges.
         let mut same = 0;
         for y in 10..50 {
