@@ -584,7 +584,7 @@ impl Plan {
         let start = s.trigger_in_delay_s + s.synch_delay_s;
         t += &format!(
             "trigger chain of one frame (from the wheel's index pulse):\n  0 µs index pulse → DMD trigger-in\n  {:.3} µs DMD sequence starts (pattern k at +k·{:.3} µs)\n  \
-             {:.3} µs DMD synch out → camera Line1 (every {}th edge) → exposure starts\n  {:.3} µs exposure ends ({} turns)\n  \
+             {:.3} µs DMD synch out → camera Line1 (one edge in {}) → exposure starts\n  {:.3} µs exposure ends ({} turns)\n  \
              {:.3} µs frame read out; next exposure {:.3} µs after this one\n",
             s.trigger_in_delay_s * 1e6, s.picture_s * 1e6, start * 1e6, s.turns_per_frame,
             (start + s.exposure_s) * 1e6, s.turns_per_exposure,
