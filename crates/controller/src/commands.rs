@@ -362,5 +362,6 @@ fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Resul
 
 /// Why `--backend real` is refused in this build.
 fn real_backends_note() -> &'static str {
-    "this build drives simulated devices only (`sim`); the real backends are not built (docs/controller.md, \"Running the rig for real\")"
+    "only `sim` runs a whole rig: the serial wheel (feature serial-wheel) and ALP-4 DMD (feature alp4) backends exist, \
+     a GenICam camera backend does not yet (docs/controller.md, \"Running the rig for real\")"
 }

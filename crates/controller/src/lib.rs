@@ -12,6 +12,7 @@ pub mod log;
 pub mod ome;
 pub mod patterns;
 pub mod plan;
+pub mod real;
 pub mod record;
 pub mod run;
 pub mod signal;

@@ -445,7 +445,8 @@ impl Session<'_> {
             });
         }
         let err = (measured_hz - s.wheel_hz).abs() / s.wheel_hz;
-        if !(err <= SPEED_TOLERANCE) || !locked {
+        // A NaN speed (the wheel did not answer) counts as off speed.
+        if err.is_nan() || err > SPEED_TOLERANCE || !locked {
             flags.push(Flag::WheelSpeed {
                 measured_hz,
                 target_hz: s.wheel_hz,

@@ -13,7 +13,7 @@ use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::scene::{self, Materials};
-use specmux_twin::sensor::{Sensor, SensorConfig};
+use specmux_twin::sensor::Sensor;
 use specmux_twin::{Experiment, Rig};
 use std::collections::{HashMap, VecDeque};
 
@@ -91,7 +91,7 @@ impl Light {
         let rig = Rig::build(exp, lib, &materials)?;
         let (sim, _) = Pipeline::build(exp, &rig, &materials)?.run()?;
         let timing = timing_of(exp);
-        let mut cfg = exp.rig.sensor.clone().unwrap_or_else(SensorConfig::default);
+        let mut cfg = exp.rig.sensor.clone().unwrap_or_default();
         cfg.exposure_s = timing.camera.exposure_s;
         let sensor = Sensor::new(&cfg, rig.width, rig.height)?;
         let rows: Vec<Vec<f64>> = rig
