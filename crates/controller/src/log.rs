@@ -47,17 +47,4 @@ impl EventLog {
     pub fn entries(&self) -> &[Event] {
         &self.entries
     }
-
-    /// Entries from index `from` on (to drain a log into a file as it grows).
-    pub fn since(&self, from: usize) -> &[Event] {
-        &self.entries[from.min(self.entries.len())..]
-    }
-
-    /// Commands sent so far (inquiries and edges excluded).
-    pub fn commands(&self) -> usize {
-        self.entries
-            .iter()
-            .filter(|e| e.kind == Kind::Command)
-            .count()
-    }
 }

@@ -240,39 +240,13 @@ pub fn read(path: &Path) -> Result<(String, Vec<Page>)> {
     if bytes.len() < 8 || &bytes[..4] != b"II*\0" {
         return Err(bad("not a little-endian TIFF"));
     }
-    let u16_at = |o: usize| {
-        bytes
-            .get(o..o + 2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-    };
-    let u32_at = |o: usize| {
-        bytes
-            .get(o..o + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
-    let mut at = u32_at(4).ok_or_else(|| bad("truncated header"))? as usize;
+    let mut at = u32_at(&bytes, 4).ok_or_else(|| bad("truncated header"))? as usize;
     let (mut description, mut pages) = (String::new(), Vec::new());
     while at != 0 {
         if pages.len() > 10_000_000 {
             return Err(bad("IFD chain does not end"));
         }
-        let n = u16_at(at).ok_or_else(|| bad("IFD beyond the end"))? as usize;
-        let mut tags = std::collections::HashMap::new();
-        for i in 0..n {
-            let e = at + 2 + 12 * i;
-            let (tag, count, value) = (u16_at(e), u32_at(e + 4), u32_at(e + 8));
-            let (Some(tag), Some(count), Some(value)) = (tag, count, value) else {
-                return Err(bad("IFD entry beyond the end"));
-            };
-            let ty = u16_at(e + 2).unwrap_or(0);
-            let value = if ty == 3 { value & 0xFFFF } else { value };
-            tags.insert(tag, (count as usize, value as usize));
-        }
-        let get = |t: u16| {
-            tags.get(&t)
-                .map(|v| v.1)
-                .ok_or_else(|| bad(&format!("tag {t} missing")))
-        };
+        let (tags, next) = ifd(&bytes, at).map_err(|why| bad(&why))?;
         if let Some(&(count, off)) = tags.get(&TAG_DESCRIPTION).filter(|_| pages.is_empty()) {
             let raw = bytes
                 .get(off..off + count)
@@ -281,41 +255,74 @@ pub fn read(path: &Path) -> Result<(String, Vec<Page>)> {
                 .trim_end_matches(['\0', ' '])
                 .to_string();
         }
-        let (w, h, bits, off, len) = (get(256)?, get(257)?, get(258)?, get(273)?, get(279)?);
-        let sample = match (bits, tags.get(&339).map_or(1, |v| v.1)) {
-            (16, 1) => Sample::U16,
-            (32, 3) => Sample::F32,
-            _ => {
-                return Err(bad(&format!(
-                    "{bits}-bit samples of format {:?}",
-                    tags.get(&339)
-                )))
-            }
-        };
-        let raw = bytes
-            .get(off..off + len)
-            .filter(|r| r.len() == w * h * sample.bytes())
-            .ok_or_else(|| bad("strip beyond the end or of the wrong size"))?;
-        let data = match sample {
-            Sample::U16 => raw
-                .chunks_exact(2)
-                .map(|b| u16::from_le_bytes([b[0], b[1]]) as f32)
-                .collect(),
-            Sample::F32 => raw
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect(),
-        };
-        pages.push(Page {
-            width: w,
-            height: h,
-            sample,
-            data,
-        });
-        at =
-            u32_at(at + 2 + 12 * n).ok_or_else(|| bad("next-IFD pointer beyond the end"))? as usize;
+        pages.push(page(&bytes, &tags).map_err(|why| bad(&why))?);
+        at = next;
     }
     Ok((description, pages))
+}
+
+fn u16_at(b: &[u8], o: usize) -> Option<u16> {
+    b.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]))
+}
+
+fn u32_at(b: &[u8], o: usize) -> Option<u32> {
+    b.get(o..o + 4)
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+}
+
+type Tags = std::collections::HashMap<u16, (usize, usize)>;
+
+/// The entries (tag → count, value) of the IFD at `at`, and the offset of the next IFD.
+fn ifd(bytes: &[u8], at: usize) -> std::result::Result<(Tags, usize), String> {
+    let n = u16_at(bytes, at).ok_or("IFD beyond the end")? as usize;
+    let mut tags = Tags::new();
+    for i in 0..n {
+        let e = at + 2 + 12 * i;
+        let (Some(tag), Some(ty), Some(count), Some(value)) = (
+            u16_at(bytes, e),
+            u16_at(bytes, e + 2),
+            u32_at(bytes, e + 4),
+            u32_at(bytes, e + 8),
+        ) else {
+            return Err("IFD entry beyond the end".into());
+        };
+        // A SHORT value sits in the first two bytes of the field.
+        let value = if ty == 3 { value & 0xFFFF } else { value };
+        tags.insert(tag, (count as usize, value as usize));
+    }
+    let next = u32_at(bytes, at + 2 + 12 * n).ok_or("next-IFD pointer beyond the end")?;
+    Ok((tags, next as usize))
+}
+
+/// The plane an IFD describes.
+fn page(bytes: &[u8], tags: &Tags) -> std::result::Result<Page, String> {
+    let get = |t: u16| tags.get(&t).map(|v| v.1).ok_or(format!("tag {t} missing"));
+    let (w, h, bits, off, len) = (get(256)?, get(257)?, get(258)?, get(273)?, get(279)?);
+    let sample = match (bits, tags.get(&339).map_or(1, |v| v.1)) {
+        (16, 1) => Sample::U16,
+        (32, 3) => Sample::F32,
+        (b, f) => return Err(format!("{b}-bit samples of format {f}")),
+    };
+    let raw = bytes
+        .get(off..off.saturating_add(len))
+        .filter(|r| Some(r.len()) == w.checked_mul(h).and_then(|p| p.checked_mul(sample.bytes())))
+        .ok_or("strip beyond the end or of the wrong size")?;
+    let data = match sample {
+        Sample::U16 => raw
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]) as f32)
+            .collect(),
+        Sample::F32 => raw
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect(),
+    };
+    Ok(Page {
+        width: w,
+        height: h,
+        sample,
+        data,
+    })
 }
 
 /// What the OME-XML of one image says.

@@ -84,10 +84,6 @@ impl Recorder {
         })
     }
 
-    pub fn dir(&self) -> &Path {
-        &self.dir
-    }
-
     fn xml(&self, with_planes: bool) -> String {
         let channels = ["raw DN".to_string()];
         ome::ome_xml(&OmeImage {
