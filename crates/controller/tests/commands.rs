@@ -113,3 +113,27 @@ fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
         "{err}"
     );
 }
+
+#[test]
+fn only_the_shaded_objects_can_move_and_at_a_finite_speed() {
+    use specmux_twin::Experiment;
+    let err = Experiment::from_toml("[scene]\nvelocity_px_per_s = [1, 0]\n", "t.toml").unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("`scene.velocity_px_per_s` = [1, 0]"),
+        "{err}"
+    );
+    let err = Experiment::from_toml(
+        "[scene]\nsource = \"shaded-objects\"\nvelocity_px_per_s = [1e9, 0]\n",
+        "t.toml",
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("at most 1e6 px/s"), "{err}");
+    assert!(Experiment::from_toml(
+        "[scene]\nsource = \"shaded-objects\"\nvelocity_px_per_s = [3, -1]\n",
+        "t.toml"
+    )
+    .unwrap()
+    .scene
+    .moves());
+}
