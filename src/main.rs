@@ -1,6 +1,7 @@
 //! The `specmux` command line: parses, calls the library, prints. Errors are one line.
 
 use clap::{Parser, Subcommand};
+use specmux_controller::commands as controller;
 use specmux_core::spectral::Library;
 use specmux_core::Result;
 use specmux_report::commands;
@@ -131,6 +132,33 @@ enum Command {
         #[arg(long, default_value = "out/reconstruct")]
         out: PathBuf,
     },
+    /// Calibrate and acquire on the simulated rig (virtual clock), reconstruct every frame with
+    /// the acquired calibration and print its error against the truth (docs/controller.md).
+    Rehearse(RunArgs),
+    /// The same plan on the simulated (`--backend sim`) or real rig; OME-TIFF files.
+    Acquire {
+        #[command(flatten)]
+        run: RunArgs,
+        #[arg(long, default_value = "sim")]
+        backend: String,
+    },
+}
+
+/// The plan of `rehearse` and `acquire`.
+#[derive(clap::Args)]
+struct RunArgs {
+    experiment: PathBuf,
+    #[arg(long, default_value_t = 100)]
+    frames: usize,
+    /// Print the plan, its checks and the expected timeline; send nothing.
+    #[arg(long)]
+    dry_run: bool,
+    /// Inject a fault in the simulated rig, KIND@EXPOSURE, e.g. dropped-frame@5.
+    #[arg(long)]
+    fault: Vec<String>,
+    /// Output folder (default out/rehearse or out/acquire).
+    #[arg(long)]
+    out: Option<PathBuf>,
 }
 
 /// Print a command's text to stdout; a closed pipe (`specmux demo | head`) ends quietly.
@@ -161,8 +189,8 @@ fn main() -> ExitCode {
     }
 }
 
-fn dispatch(cmd: Command, lib: &Library) -> Result<String> {
-    match cmd {
+fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> {
+    let done: Result<String> = match cmd {
         Command::Demo { scene, size, out } => commands::demo(&scene, size, &out, lib),
         Command::Simulate {
             experiment,
@@ -205,5 +233,16 @@ fn dispatch(cmd: Command, lib: &Library) -> Result<String> {
             truth,
             out,
         } => commands::reconstruct(&frame, experiment.as_deref(), truth.as_deref(), &out, lib),
+        Command::Rehearse(a) => return controller::rehearse(&a.into(), lib),
+        Command::Acquire { run, backend } => {
+            return controller::acquire(&backend, &run.into(), lib)
+        }
+    };
+    done.map_err(|e| e.to_string())
+}
+
+impl From<RunArgs> for controller::RunOptions {
+    fn from(a: RunArgs) -> Self {
+        Self::new(a.experiment, a.frames, a.dry_run, a.fault, a.out)
     }
 }

@@ -23,6 +23,11 @@ pub struct SceneConfig {
     pub seed: u64,
     /// Band grid: first and last band centre and the step, in nm (the CAVE grid 400–700/10).
     pub wavelengths_nm: [f64; 3],
+    /// Speed of the objects over the static background, in pixels per second of rig time
+    /// (`shaded-objects` only): the spheres move, the velvet stays. Default [0, 0] (still).
+    /// The forward model images the scene at t = 0; the controller's rehearsal images it at
+    /// each exposure's mid-time.
+    pub velocity_px_per_s: [f64; 2],
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -41,6 +46,7 @@ impl Default for SceneConfig {
             quantity: Quantity::Reflectance,
             seed: 7,
             wavelengths_nm: [400.0, 700.0, 10.0],
+            velocity_px_per_s: [0.0, 0.0],
         }
     }
 }
@@ -93,6 +99,7 @@ impl SceneConfig {
                 ));
             }
         }
+        self.validate_motion(f)?;
         let [lo, hi, step] = self.wavelengths_nm;
         if !(step.is_finite() && step > 0.0) {
             return Err(Error::config(
@@ -108,6 +115,34 @@ impl SceneConfig {
                 "scene.wavelengths_nm",
                 format!("[{lo}, {hi}, {step}]"),
                 "needs 0 < first < last",
+            ));
+        }
+        Ok(())
+    }
+
+    /// True when the scene's objects move.
+    pub fn moves(&self) -> bool {
+        self.velocity_px_per_s != [0.0, 0.0]
+    }
+
+    /// A finite speed, and only for a scene whose objects can move.
+    fn validate_motion(&self, f: &str) -> Result<()> {
+        let v = self.velocity_px_per_s;
+        let value = format!("[{}, {}]", v[0], v[1]);
+        if !v.iter().all(|c| c.is_finite() && c.abs() <= 1e6) {
+            return Err(Error::config(
+                f,
+                "scene.velocity_px_per_s",
+                value,
+                "must be finite, at most 1e6 px/s",
+            ));
+        }
+        if self.moves() && self.source != "shaded-objects" {
+            return Err(Error::config(
+                f,
+                "scene.velocity_px_per_s",
+                value,
+                "only the objects of \"shaded-objects\" can move",
             ));
         }
         Ok(())

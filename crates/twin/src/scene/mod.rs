@@ -51,8 +51,6 @@ impl Materials {
     }
 }
 
-/// The experiment's band grid.
-
 /// Check a `[scene]` section: the source names a built-in scene, an EXR cube or a Mitsuba
 /// render, and the size and grid are valid; the error names the key and the value.
 pub fn validate(cfg: &SceneConfig, f: &str) -> Result<()> {
@@ -72,6 +70,12 @@ pub fn validate(cfg: &SceneConfig, f: &str) -> Result<()> {
 
 /// Build the experiment's scene: a procedural one from held-out materials, or an EXR cube.
 pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Scene> {
+    build_at(cfg, file, materials, 0.0)
+}
+
+/// The scene at time `t_s` (s): moving objects shifted by `velocity_px_per_s`·t; a still
+/// scene is the same at every time.
+pub fn build_at(cfg: &SceneConfig, file: &str, materials: &Materials, t_s: f64) -> Result<Scene> {
     let grid = cfg.grid(file)?;
     let [w, h] = cfg.size;
     let spectra: Vec<Vec<f32>> = materials
@@ -87,7 +91,8 @@ pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Sce
         }
         "shaded-objects" => {
             // The background is black velvet: a flat 2 % reflectance.
-            let s = shaded::spheres(w, h, spectra.len(), cfg.seed);
+            let [vx, vy] = cfg.velocity_px_per_s;
+            let s = shaded::spheres_at(w, h, spectra.len(), cfg.seed, [vx * t_s, vy * t_s]);
             let refl = |m: Option<u32>, b: usize| m.map_or(0.02, |m| spectra[m as usize][b]);
             paint(w, h, grid.count, |b, p| {
                 let (m1, w1, m2, w2) = s.layers[p];

@@ -16,6 +16,17 @@ pub struct Shading {
 
 /// Draw 6–9 spheres of random size and material; the light comes from the upper left.
 pub fn spheres(width: usize, height: usize, materials: usize, seed: u64) -> Shading {
+    spheres_at(width, height, materials, seed, [0.0, 0.0])
+}
+
+/// The same spheres moved by `shift` pixels (the background stays): a moving scene.
+pub fn spheres_at(
+    width: usize,
+    height: usize,
+    materials: usize,
+    seed: u64,
+    shift: [f64; 2],
+) -> Shading {
     let mut rng = Pcg64::seed_from_u64(seed);
     let s = width.min(height) as f64;
     let n = rng.gen_range(6..=9);
@@ -39,10 +50,11 @@ pub fn spheres(width: usize, height: usize, materials: usize, seed: u64) -> Shad
     };
     let mut layers = vec![(None, 1.0f32, None, 0.0f32); width * height];
     for &(cx, cy, r, m) in &balls {
+        let (cx, cy) = (cx + shift[0], cy + shift[1]);
         let y0 = (cy - r - 1.0).max(0.0) as usize;
-        let y1 = ((cy + r + 1.0) as usize).min(height);
+        let y1 = (cy + r + 1.0).clamp(0.0, height as f64) as usize;
         let x0 = (cx - r - 1.0).max(0.0) as usize;
-        let x1 = ((cx + r + 1.0) as usize).min(width);
+        let x1 = (cx + r + 1.0).clamp(0.0, width as f64) as usize;
         for y in y0..y1 {
             for x in x0..x1 {
                 let (dx, dy) = ((x as f64 + 0.5 - cx) / r, (y as f64 + 0.5 - cy) / r);
@@ -87,5 +99,25 @@ mod tests {
             }
         }
         assert!(lit > 96 * 80 / 10, "{lit}");
+    }
+
+    #[test]
+    fn moved_spheres_are_the_same_spheres_shifted() {
+        let (a, b) = (
+            spheres(64, 64, 10, 3),
+            spheres_at(64, 64, 10, 3, [5.0, -2.0]),
+        );
+        // A pixel of the still scene reappears 5 px right and 2 px up, away from the edges.
+        let mut same = 0;
+        for y in 10..50 {
+            for x in 10..50 {
+                let (p, q) = (a.layers[y * 64 + x], b.layers[(y - 2) * 64 + x + 5]);
+                same += usize::from(p.0 == q.0 && (p.1 - q.1).abs() < 1e-6);
+            }
+        }
+        assert_eq!(same, 40 * 40);
+        // Moved entirely out of the frame: only background.
+        let gone = spheres_at(64, 64, 10, 3, [1e4, 0.0]);
+        assert!(gone.layers.iter().all(|l| l.0.is_none()));
     }
 }

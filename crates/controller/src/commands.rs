@@ -1,0 +1,386 @@
+//! The `rehearse` and `acquire` commands: load the experiment, build and check the plan, run it
+//! on the simulated (or real) devices while recording, and return the text to print or the
+//! one-line error.
+
+use crate::error::{Error, Result};
+use crate::plan::{DeviceLimits, HostLimits, Plan};
+use crate::record::Recorder;
+use crate::run::{self, FrameRecord, Outcome, Sink};
+use crate::sim::{Fault, Faults, SimRig};
+use crate::{devices::Frame, signal};
+use serde::Serialize;
+use specmux_core::calibration::{Calibration, CalibrationFrames};
+use specmux_core::metrics;
+use specmux_core::reconstructor::Reconstructor;
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+use specmux_twin::{Experiment, Rig};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// What `rehearse` and `acquire` are asked to do.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub experiment: PathBuf,
+    pub frames: usize,
+    /// Print the plan, its checks and timeline; send nothing.
+    pub dry_run: bool,
+    /// Faults for the simulated devices, `KIND@EXPOSURE`.
+    pub faults: Vec<String>,
+    /// The output folder; None for `out/<command>`.
+    pub out: Option<PathBuf>,
+}
+
+impl RunOptions {
+    pub fn new(
+        experiment: PathBuf,
+        frames: usize,
+        dry_run: bool,
+        faults: Vec<String>,
+        out: Option<PathBuf>,
+    ) -> RunOptions {
+        RunOptions {
+            experiment,
+            frames,
+            dry_run,
+            faults,
+            out,
+        }
+    }
+
+    fn out_or(&self, default: &str) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| PathBuf::from(default))
+    }
+}
+
+/// Append one formatted line.
+macro_rules! say {
+    ($text:ident, $($t:tt)*) => {{
+        use std::fmt::Write;
+        let _ = writeln!($text, $($t)*);
+    }};
+}
+
+/// The plan for the simulated rig of an experiment, with its summary, checks and timeline.
+fn sim_plan(exp: &Experiment, frames: usize, out: &Path) -> (Plan, String) {
+    let plan = Plan::new(
+        exp,
+        frames,
+        &DeviceLimits::of_twin(exp),
+        &HostLimits::measure(out),
+    );
+    let text = format!(
+        "{}{}{}",
+        plan.summary(),
+        plan.checks_text(),
+        plan.timeline_text()
+    );
+    (plan, text)
+}
+
+/// The verdict of a dry run: nothing is sent to any device.
+fn dry_run(plan: &Plan, mut text: String) -> String {
+    match plan.verify() {
+        Ok(()) => say!(
+            text,
+            "dry run: the plan passes every check; no device was sent a command"
+        ),
+        Err(e) => say!(text, "dry run: {e}; no device was sent a command"),
+    }
+    text
+}
+
+/// One reconstructed frame of a rehearsal.
+#[derive(Clone, Debug, Serialize)]
+pub struct RehearsedFrame {
+    pub frame_id: u64,
+    pub timestamp_s: f64,
+    pub flags: usize,
+    pub psnr_db: f64,
+    pub ssim: f64,
+    pub sam_deg: Option<f64>,
+    pub reconstruction_s: f64,
+}
+
+/// Records the rehearsal and reconstructs each frame as it arrives, with the calibration
+/// acquired in the same run.
+struct Rehearsal<'a> {
+    recorder: Recorder,
+    sim: SimRig,
+    exp: &'a Experiment,
+    rig: Rig,
+    recon: Option<Reconstructor>,
+    rows: Vec<RehearsedFrame>,
+    frames: usize,
+    progress: bool,
+}
+
+impl Sink for Rehearsal<'_> {
+    fn calibrated(&mut self, f: &CalibrationFrames, records: &[FrameRecord]) -> Result<()> {
+        self.recorder.calibrated(f, records)?;
+        let cal =
+            Calibration::from_frames(&self.rig.carriers, f, self.exp.calibration.search_bins)?;
+        self.recon = Some(Reconstructor::new(
+            &self.exp.reconstruct,
+            &self.rig.design(),
+            &cal,
+            &self.exp.file,
+        )?);
+        Ok(())
+    }
+
+    fn frame(&mut self, r: &FrameRecord, frame: &Frame) -> Result<()> {
+        self.recorder.frame(r, frame)?;
+        let recon = self
+            .recon
+            .as_ref()
+            .ok_or_else(|| Error::device("controller", "a frame before the calibration"))?;
+        let raw = Cube::from_vec(
+            frame.width,
+            frame.height,
+            1,
+            frame.data.iter().map(|&v| v as f32).collect(),
+        )?;
+        let t = Instant::now();
+        let out = recon.run(&raw, None)?;
+        let seconds = t.elapsed().as_secs_f64();
+        let m = metrics::compare(&self.sim.truth(frame)?, &out.cube)?;
+        self.rows.push(RehearsedFrame {
+            frame_id: r.frame_id,
+            timestamp_s: r.timestamp_s,
+            flags: r.flags.len(),
+            psnr_db: m.psnr_db,
+            ssim: m.ssim,
+            sam_deg: m.sam_deg,
+            reconstruction_s: seconds,
+        });
+        if self.progress {
+            eprint!("\rframe {}/{}", self.rows.len(), self.frames);
+        }
+        Ok(())
+    }
+
+    fn stop_requested(&self) -> bool {
+        signal::requested()
+    }
+}
+
+/// Parse `--fault KIND@N` arguments.
+fn faults(specs: &[String]) -> Result<Faults> {
+    Ok(Faults(
+        specs
+            .iter()
+            .map(|s| Fault::parse(s))
+            .collect::<Result<_>>()?,
+    ))
+}
+
+/// `specmux rehearse`: the plan, its checks and timeline; then (unless a dry run) calibration
+/// and acquisition on the simulated rig, every frame reconstructed with the acquired
+/// calibration and compared with the truth.
+pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, String> {
+    rehearse_in(o, &o.out_or("out/rehearse"), lib).map_err(|e| e.to_string())
+}
+
+fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
+    let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
+    let faults = faults(&o.faults)?;
+    let (plan, text) = sim_plan(&exp, frames, out);
+    if dry {
+        return Ok(dry_run(&plan, text));
+    }
+    plan.verify()?;
+    let wall = Instant::now();
+    let (sim, rig) = SimRig::new(&exp, lib, faults)?;
+    let mut dev = sim.devices();
+    let recorder = Recorder::create(out, &plan)?;
+    let progress = std::io::stderr().is_terminal();
+    let mut sink = Rehearsal {
+        recorder,
+        sim: sim.clone(),
+        exp: &exp,
+        rig,
+        recon: None,
+        rows: Vec::new(),
+        frames,
+        progress,
+    };
+    signal::install();
+    let outcome = run::run(&plan, &mut dev, &mut sink)?;
+    sink.recorder.finish(&outcome, &sim.events())?;
+    if progress {
+        eprintln!();
+    }
+    specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
+    let mut text = text;
+    text += &frame_table(&sink.rows);
+    text += &outcome_text(&outcome, sim.now_s(), wall.elapsed().as_secs_f64());
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+fn frame_table(rows: &[RehearsedFrame]) -> String {
+    let mut t = format!(
+        "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9}\n",
+        "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s"
+    );
+    for r in rows {
+        t += &format!(
+            "{:>6} {:>10.6} {:>6} {:>9.2} {:>7.4} {:>9} {:>9.4}\n",
+            r.frame_id,
+            r.timestamp_s,
+            r.flags,
+            r.psnr_db,
+            r.ssim,
+            specmux_core::metrics::show(r.sam_deg, 2),
+            r.reconstruction_s
+        );
+    }
+    let clean: Vec<&RehearsedFrame> = rows.iter().filter(|r| r.flags == 0).collect();
+    if !clean.is_empty() {
+        let n = clean.len() as f64;
+        let mean = |f: fn(&RehearsedFrame) -> f64| clean.iter().map(|r| f(r)).sum::<f64>() / n;
+        let lo = clean
+            .iter()
+            .map(|r| r.psnr_db)
+            .fold(f64::INFINITY, f64::min);
+        let hi = clean
+            .iter()
+            .map(|r| r.psnr_db)
+            .fold(f64::NEG_INFINITY, f64::max);
+        t += &format!(
+            "clean frames {}: cube PSNR mean {:.2} dB (min {lo:.2}, max {hi:.2}), SSIM {:.4}, SAM {}°; reconstruction {:.4} s/frame\n",
+            clean.len(),
+            mean(|r| r.psnr_db),
+            mean(|r| r.ssim),
+            mean_sam(&clean),
+            mean(|r| r.reconstruction_s)
+        );
+    }
+    t
+}
+
+/// The mean SAM over frames where it is defined ("undefined" when it is nowhere).
+fn mean_sam(frames: &[&RehearsedFrame]) -> String {
+    let v: Vec<f64> = frames.iter().filter_map(|r| r.sam_deg).collect();
+    specmux_core::metrics::show(
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64),
+        2,
+    )
+}
+
+fn outcome_text(o: &Outcome, virtual_s: f64, wall_s: f64) -> String {
+    let mut t = String::new();
+    let flagged = o.frames.iter().filter(|r| !r.ok()).count();
+    say!(
+        t,
+        "acquired {} frames ({flagged} marked), calibration from {} exposures; {} incidents",
+        o.frames.len(),
+        o.calibration.len(),
+        o.incidents.len()
+    );
+    for i in &o.incidents {
+        say!(t, "  {}: {}", i.kind, i.message);
+    }
+    match &o.stopped_because {
+        Some(why) => say!(t, "stopped early: {why}; the frames acquired are kept"),
+        None if !o.completed => say!(
+            t,
+            "stopped early by the operator; the frames acquired are kept"
+        ),
+        None => say!(t, "completed; devices stopped camera → DMD → wheel"),
+    }
+    say!(t, "virtual time {virtual_s:.3} s, wall time {wall_s:.2} s");
+    t
+}
+
+/// A recorder that also shows progress and honours Ctrl-C.
+struct Acquisition {
+    recorder: Recorder,
+    frames: usize,
+    done: usize,
+    progress: bool,
+}
+
+impl Sink for Acquisition {
+    fn calibrated(&mut self, f: &CalibrationFrames, r: &[FrameRecord]) -> Result<()> {
+        self.recorder.calibrated(f, r)
+    }
+
+    fn frame(&mut self, r: &FrameRecord, frame: &Frame) -> Result<()> {
+        self.recorder.frame(r, frame)?;
+        self.done += 1;
+        if self.progress {
+            eprint!("\rframe {}/{}", self.done, self.frames);
+        }
+        Ok(())
+    }
+
+    fn stop_requested(&self) -> bool {
+        signal::requested()
+    }
+}
+
+/// `specmux acquire`: the same plan on the simulated devices (`sim`) or the real ones
+/// (`real`), writing the same files. An acquisition that stops early is an error, after its
+/// files are written.
+pub fn acquire(
+    backend: &str,
+    o: &RunOptions,
+    lib: &Library,
+) -> std::result::Result<String, String> {
+    acquire_in(backend, o, &o.out_or("out/acquire"), lib).map_err(|e| e.to_string())
+}
+
+fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
+    let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
+    if backend != "sim" {
+        return Err(Error::refused("--backend", backend, real_backends_note()));
+    }
+    let (plan, text) = sim_plan(&exp, frames, out);
+    if dry {
+        return Ok(dry_run(&plan, text));
+    }
+    plan.verify()?;
+    let wall = Instant::now();
+    let (sim, _) = SimRig::new(&exp, lib, faults(&o.faults)?)?;
+    let mut dev = sim.devices();
+    let progress = std::io::stderr().is_terminal();
+    let mut sink = Acquisition {
+        recorder: Recorder::create(out, &plan)?,
+        frames,
+        done: 0,
+        progress,
+    };
+    signal::install();
+    let outcome = run::run(&plan, &mut dev, &mut sink)?;
+    sink.recorder.finish(&outcome, &sim.events())?;
+    if progress {
+        eprintln!();
+    }
+    if !outcome.completed {
+        let why = outcome
+            .stopped_because
+            .clone()
+            .unwrap_or_else(|| "stopped by the operator".into());
+        return Err(Error::device(
+            "acquire",
+            format!(
+                "{why}; {} frames kept in {}",
+                outcome.frames.len(),
+                out.display()
+            ),
+        ));
+    }
+    let mut text = text;
+    text += &outcome_text(&outcome, sim.now_s(), wall.elapsed().as_secs_f64());
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+/// Why `--backend real` is refused in this build.
+fn real_backends_note() -> &'static str {
+    "only `sim` runs a whole rig: the serial wheel (feature serial-wheel) and ALP-4 DMD (feature alp4) backends exist, \
+     a GenICam camera backend does not yet (docs/controller.md, \"Running the rig for real\")"
+}

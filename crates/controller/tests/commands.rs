@@ -1,0 +1,139 @@
+//! The `rehearse` and `acquire` commands end to end on a small experiment file.
+
+mod common;
+
+use specmux_controller::commands::{acquire, rehearse, RunOptions};
+use specmux_controller::ome;
+use std::path::PathBuf;
+
+fn setup(name: &str, scene: &str) -> (PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("specmux-cmd-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("exp.toml");
+    let text = format!(
+        "[scene]\nsource = \"shaded-objects\"\nsize = [64, 64]\nseed = 11\n{scene}\n[calibration]\nframes = 2\n[rig.timing]\n[rig.sensor]\n"
+    );
+    std::fs::write(&file, text).unwrap();
+    (file, dir.join("out"))
+}
+
+#[test]
+fn a_dry_run_prints_plan_checks_and_timeline_and_writes_nothing() {
+    let (file, out) = setup("dry", "");
+    let o = RunOptions::new(file.clone(), 10, true, vec![], Some(out.clone()));
+    let text = rehearse(&o, &common::lib()).unwrap();
+    for part in [
+        "plan for",
+        "TriggerDivider=42",
+        "checks:",
+        "expected timeline",
+        "trigger chain",
+        "passes every check",
+    ] {
+        assert!(text.contains(part), "{part}\n{text}");
+    }
+    assert!(!out.exists());
+    // An infeasible plan: the dry run says why, naming the key; the real run refuses in one line.
+    let bad = RunOptions::new(file, 0, true, vec![], Some(out.clone()));
+    assert!(rehearse(&bad, &common::lib())
+        .unwrap()
+        .contains("REFUSE --frames = 0"));
+    let err = rehearse(
+        &RunOptions {
+            dry_run: false,
+            ..bad
+        },
+        &common::lib(),
+    )
+    .unwrap_err();
+    assert!(
+        err.starts_with("plan refused: `--frames` = 0") && !err.contains('\n'),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn rehearsing_a_moving_scene_reconstructs_every_frame() {
+    let (file, out) = setup("moving", "velocity_px_per_s = [200, 0]");
+    let o = RunOptions::new(
+        file,
+        3,
+        false,
+        vec!["dmd-underrun@1".into()],
+        Some(out.clone()),
+    );
+    let text = rehearse(&o, &common::lib()).unwrap();
+    assert!(
+        text.contains("acquired 3 frames (1 marked)") && text.contains("dmd-underrun"),
+        "{text}"
+    );
+    let rows: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(out.join("rehearsal.json")).unwrap())
+            .unwrap();
+    assert_eq!(rows.len(), 3);
+    for r in &rows {
+        assert!(r["psnr_db"].as_f64().unwrap() > 15.0, "{r}");
+    }
+    let (xml, pages) = ome::read(&out.join("frames.ome.tif")).unwrap();
+    assert_eq!(pages.len(), 3);
+    assert!(xml.contains("<M K=\"event_log\">events.jsonl</M>"), "{xml}");
+}
+
+#[test]
+fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
+    let (file, out) = setup("acquire", "");
+    let o = RunOptions::new(file, 2, false, vec![], Some(out.clone()));
+    let text = acquire("sim", &o, &common::lib()).unwrap();
+    assert!(text.contains("completed"), "{text}");
+    for f in [
+        "plan.json",
+        "frames.ome.tif",
+        "frames.jsonl",
+        "calibration.ome.tif",
+        "calibration.json",
+        "events.jsonl",
+        "acquisition.json",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    let err = acquire("real", &o, &common::lib()).unwrap_err();
+    assert!(err.starts_with("plan refused: `--backend` = real"), "{err}");
+    let err = acquire(
+        "sim",
+        &RunOptions {
+            faults: vec!["camera-stops@1".into()],
+            ..o
+        },
+        &common::lib(),
+    )
+    .unwrap_err();
+    assert!(
+        err.contains("no answer") && err.contains("1 frames kept"),
+        "{err}"
+    );
+}
+
+#[test]
+fn only_the_shaded_objects_can_move_and_at_a_finite_speed() {
+    use specmux_twin::Experiment;
+    let err = Experiment::from_toml("[scene]\nvelocity_px_per_s = [1, 0]\n", "t.toml").unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("`scene.velocity_px_per_s` = [1, 0]"),
+        "{err}"
+    );
+    let err = Experiment::from_toml(
+        "[scene]\nsource = \"shaded-objects\"\nvelocity_px_per_s = [1e9, 0]\n",
+        "t.toml",
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("at most 1e6 px/s"), "{err}");
+    assert!(Experiment::from_toml(
+        "[scene]\nsource = \"shaded-objects\"\nvelocity_px_per_s = [3, -1]\n",
+        "t.toml"
+    )
+    .unwrap()
+    .scene
+    .moves());
+}
