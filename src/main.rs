@@ -120,6 +120,11 @@ enum Command {
         #[arg(long, default_value = "out/ptc")]
         out: PathBuf,
     },
+    /// Design tools: the wheel's filter set and the carrier layout, scored by simulation.
+    Design {
+        #[command(subcommand)]
+        what: Design,
+    },
     /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig.
     Reconstruct {
         frame: PathBuf,
@@ -131,6 +136,16 @@ enum Command {
         #[arg(long, default_value = "out/reconstruct")]
         out: PathBuf,
     },
+}
+
+#[derive(Subcommand)]
+enum Design {
+    /// Choose the wheel's filters from a catalogue: the paper's criterion and better predictors,
+    /// searched exactly, the best sets simulated on the scenes; writes `[rig.wheel]`.
+    Filters(specmux_design::filters::FilterArgs),
+    /// Lay out the carriers on exact FFT bins, scored by scene spectra leaking into the windows
+    /// and by simulation against the paper's layout and the diamond rule; writes `[rig.carriers]`.
+    Carriers(specmux_design::carriers::CarrierArgs),
 }
 
 /// Print a command's text to stdout; a closed pipe (`specmux demo | head`) ends quietly.
@@ -199,6 +214,12 @@ fn dispatch(cmd: Command, lib: &Library) -> Result<String> {
             size,
             out,
         } => commands::ptc(experiment.as_deref(), size, &out),
+        Command::Design {
+            what: Design::Filters(a),
+        } => specmux_design::filters::run(&a, lib),
+        Command::Design {
+            what: Design::Carriers(a),
+        } => specmux_design::carriers::run(&a, lib),
         Command::Reconstruct {
             frame,
             experiment,

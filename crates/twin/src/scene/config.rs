@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneConfig {
-    /// `dead-leaves`, `shaded-objects`, `exr:<path>` (a reflectance or radiance cube), or
+    /// `dead-leaves`, `shaded-objects`, `bars`, `exr:<path>` (a reflectance or radiance cube), or
     /// `mitsuba:<prefix>` (a Mitsuba render `<prefix>_truth.exr`, radiance; scene/mitsuba.rs).
     pub source: String,
     /// Width and height in pixels (procedural scenes; the prototype's 768 × 768).
@@ -82,14 +82,14 @@ impl SceneConfig {
 
     /// Check the source, size and band grid; the error names the key and the value.
     pub fn validate(&self, f: &str) -> Result<()> {
-        let known = ["dead-leaves", "shaded-objects"];
+        let known = ["dead-leaves", "shaded-objects", "bars"];
         let prefixed = ["exr:", super::mitsuba::PREFIX].map(|p| self.source.starts_with(p));
         if !known.contains(&self.source.as_str()) && !prefixed.contains(&true) {
             return Err(Error::config(
                 f,
                 "scene.source",
                 format!("\"{}\"", self.source),
-                "expected \"dead-leaves\", \"shaded-objects\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
+                "expected \"dead-leaves\", \"shaded-objects\", \"bars\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
             ));
         }
         super::mitsuba::check(self, f)?;

@@ -1,6 +1,7 @@
-//! Scenes: procedural (dead leaves, shaded objects), EXR cubes and Mitsuba renders, and the
+//! Scenes: procedural (dead leaves, shaded objects, bars), EXR cubes and Mitsuba renders, and the
 //! reflectance library split into the basis's training half and the scenes' held-out half.
 
+pub mod bars;
 pub mod config;
 pub mod dead_leaves;
 pub mod mitsuba;
@@ -64,8 +65,12 @@ pub fn build(cfg: &SceneConfig, file: &str, materials: &Materials) -> Result<Sce
         .collect();
     let src = cfg.source.as_str();
     let cube = match src {
-        "dead-leaves" => {
-            let labels = dead_leaves::labels(w, h, spectra.len(), cfg.seed);
+        "dead-leaves" | "bars" => {
+            let labels = if src == "bars" {
+                bars::labels(w, h, spectra.len(), cfg.seed)
+            } else {
+                dead_leaves::labels(w, h, spectra.len(), cfg.seed)
+            };
             paint(w, h, grid.count, |b, p| spectra[labels[p] as usize][b])
         }
         "shaded-objects" => {
