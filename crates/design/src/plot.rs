@@ -11,7 +11,9 @@ use specmux_io::png::write_png;
 use specmux_report::plot::register_font;
 use std::path::Path;
 
+/// Canvas of the curve plots, and of the Fourier plane (its data area square: 612 × 612 px).
 const SIZE: (u32, u32) = (1100, 620);
+const SQUARE: (u32, u32) = (1000, 716);
 /// Width of the legend column on the right.
 const LEGEND_W: u32 = 300;
 
@@ -25,13 +27,13 @@ fn err(path: &Path) -> impl Fn(String) -> Error + '_ {
 /// Render into memory with `draw(plot area, legend area)`, then write the PNG atomically.
 fn render(
     path: &Path,
+    (w, h): (u32, u32),
     draw: impl FnOnce(
         &DrawingArea<BitMapBackend, Shift>,
         &DrawingArea<BitMapBackend, Shift>,
     ) -> std::result::Result<(), String>,
 ) -> Result<()> {
     register_font(path)?;
-    let (w, h) = SIZE;
     let mut buf = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
@@ -62,7 +64,7 @@ fn legend(
 
 /// Transmittance of each curve over `range_nm`, one colour per curve.
 pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64)) -> Result<()> {
-    render(path, |plot, leg| {
+    render(path, SIZE, |plot, leg| {
         let mut chart = ChartBuilder::on(plot)
             .caption(title, ("sans-serif", 20))
             .margin(14)
@@ -100,9 +102,9 @@ pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64))
 pub fn fourier_plane(path: &Path, title: &str, layout: &Layout, spectrum: &[f64]) -> Result<()> {
     let n = layout.size as i64;
     let peak = spectrum.iter().cloned().fold(f64::MIN_POSITIVE, f64::max);
-    render(path, |plot, leg| {
+    render(path, SQUARE, |plot, leg| {
         let mut chart = ChartBuilder::on(plot)
-            .caption(title, ("sans-serif", 20))
+            .caption(title, ("sans-serif", 18))
             .margin(14)
             .x_label_area_size(44)
             .y_label_area_size(60)
@@ -149,18 +151,28 @@ fn draw_windows(
     let n = layout.size as f64;
     let half = layout.window as f64 / 2.0 / n;
     let wrap = |v: f64| (v + 0.5).rem_euclid(1.0) - 0.5;
+    // A window that crosses the edge of the plane is drawn with its periodic copies, clipped.
     let rect = |cx: f64, cy: f64, style: ShapeStyle| {
         let (cx, cy) = (wrap(cx), wrap(cy));
-        Rectangle::new([(cx - half, cy - half), (cx + half, cy + half)], style)
+        let clip = |v: f64| v.clamp(-0.5, 0.5);
+        [-1.0, 0.0, 1.0]
+            .into_iter()
+            .flat_map(|dx| [-1.0, 0.0, 1.0].map(|dy| (cx + dx, cy + dy)))
+            .filter(|&(x, y)| (x - half < 0.5 && x + half > -0.5) && (y - half < 0.5 && y + half > -0.5))
+            .map(move |(x, y)| {
+                let corners = [(clip(x - half), clip(y - half)), (clip(x + half), clip(y + half))];
+                Rectangle::new(corners, style)
+            })
+            .collect::<Vec<_>>()
     };
     let e = |e: DrawingAreaErrorKind<_>| e.to_string();
     let mut entries = vec![("DC window".to_string(), BLACK.stroke_width(2))];
-    chart.draw_series([rect(0.0, 0.0, BLACK.stroke_width(2))]).map_err(e)?;
+    chart.draw_series(rect(0.0, 0.0, BLACK.stroke_width(2))).map_err(e)?;
     for (i, &(bx, by)) in layout.bins.iter().enumerate() {
         let c = Palette99::pick(i).to_rgba();
         let (fx, fy) = (bx as f64 / n, by as f64 / n);
         chart
-            .draw_series([rect(fx, fy, c.stroke_width(3)), rect(-fx, -fy, c.stroke_width(1))])
+            .draw_series(rect(fx, fy, c.stroke_width(3)).into_iter().chain(rect(-fx, -fy, c.stroke_width(1))))
             .map_err(e)?;
         let h = (wrap(2.0 * fx), wrap(2.0 * fy));
         let marks = [h, (-h.0, -h.1)].map(|p| Cross::new(p, 6, c.stroke_width(2)));

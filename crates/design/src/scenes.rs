@@ -63,8 +63,11 @@ pub fn load(files: &[PathBuf], size: Option<usize>) -> Result<Vec<Experiment>> {
     Ok(out)
 }
 
-/// A short label of a scene for tables: the file stem, or the source.
+/// A short label of a scene for tables: a procedural scene's source, else the file stem.
 pub fn label(exp: &Experiment) -> String {
+    if is_procedural(exp) {
+        return exp.scene.source.clone();
+    }
     Path::new(&exp.file)
         .file_stem()
         .map(|s| s.to_string_lossy().to_string())
