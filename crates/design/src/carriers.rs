@@ -88,9 +88,17 @@ pub struct Candidate {
 impl Candidate {
     /// Smallest and mean final-cube PSNR gain over `base` across the simulation scenes.
     pub fn gain_over(&self, base: &Candidate) -> (f64, f64) {
-        let g: Vec<f64> = self.ideal.iter().zip(&base.ideal).map(|(a, b)| a.cube_psnr_db - b.cube_psnr_db).collect();
+        let g: Vec<f64> = self
+            .ideal
+            .iter()
+            .zip(&base.ideal)
+            .map(|(a, b)| a.cube_psnr_db - b.cube_psnr_db)
+            .collect();
         let n = g.len().max(1) as f64;
-        (g.iter().cloned().fold(f64::INFINITY, f64::min), g.iter().sum::<f64>() / n)
+        (
+            g.iter().cloned().fold(f64::INFINITY, f64::min),
+            g.iter().sum::<f64>() / n,
+        )
     }
 }
 
@@ -114,7 +122,10 @@ fn design_scenes(a: &CarrierArgs, base: &Experiment) -> Result<Vec<Experiment>> 
     let mut out = if a.cube.is_empty() {
         scenes::load(&scenes::files(&a.scenes, &a.scenes_dir)?, Some(a.size))?
     } else {
-        a.cube.iter().map(|p| user_cube(p, base)).collect::<Result<Vec<_>>>()?
+        a.cube
+            .iter()
+            .map(|p| user_cube(p, base))
+            .collect::<Result<Vec<_>>>()?
     };
     for e in &mut out {
         e.rig.wheel = base.rig.wheel.clone();
@@ -147,17 +158,25 @@ fn unmix_weights(rig: &Rig, eta: f64) -> Result<Vec<f64>> {
     let f = rig.system_matrix();
     let b = &rig.basis.vectors;
     let d2b = second_difference(b.nrows()) * b;
-    let h: DMatrix<f64> = f.transpose() * &f + eta / rig.grid.step_nm.powi(4) * d2b.transpose() * d2b;
+    let h: DMatrix<f64> =
+        f.transpose() * &f + eta / rig.grid.step_nm.powi(4) * d2b.transpose() * d2b;
     let m = h
         .cholesky()
-        .ok_or_else(|| Error::Numerical("the base rig's unmixing Hessian is not positive definite".into()))?
+        .ok_or_else(|| {
+            Error::Numerical("the base rig's unmixing Hessian is not positive definite".into())
+        })?
         .solve(&f.transpose());
     let p = b * m;
     Ok(p.column_iter().map(|c| c.norm_squared()).collect())
 }
 
 /// Measure every design scene's channel spectra on the N-bin grid; the weights of the base rig.
-fn measure(scenes: &[Experiment], base: &Experiment, n: usize, lib: &Library) -> Result<(Vec<SceneSpectra>, Vec<f64>)> {
+fn measure(
+    scenes: &[Experiment],
+    base: &Experiment,
+    n: usize,
+    lib: &Library,
+) -> Result<(Vec<SceneSpectra>, Vec<f64>)> {
     let materials = Materials::load(lib)?;
     let bar = progress::bar("measuring scene spectra");
     bar.set_length(scenes.len() as u64);
@@ -175,23 +194,43 @@ fn measure(scenes: &[Experiment], base: &Experiment, n: usize, lib: &Library) ->
 
 fn parse_window(s: &str) -> Result<WindowShape> {
     WindowShape::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| {
-        Error::config("--window", "window", s, &format!("{e}; expected square, circular or super-gaussian"))
+        Error::config(
+            "--window",
+            "window",
+            s,
+            &format!("{e}; expected square, circular or super-gaussian"),
+        )
     })
 }
 
 /// Check the arguments; the error names the option and the value.
 fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
     if !(16..=4096).contains(&a.size) {
-        return Err(Error::config("--size", "size", a.size, "must be 16 to 4096 pixels"));
+        return Err(Error::config(
+            "--size",
+            "size",
+            a.size,
+            "must be 16 to 4096 pixels",
+        ));
     }
     if let Some(c) = a.crop.iter().find(|c| !(**c > 0.0 && **c <= 0.5)) {
         return Err(Error::config("--crop", "crop", c, "must be in (0, 0.5]"));
     }
     if !(a.harmonic.is_finite() && (0.0..=1.0).contains(&a.harmonic)) {
-        return Err(Error::config("--harmonic", "harmonic", a.harmonic, "must be in [0, 1]"));
+        return Err(Error::config(
+            "--harmonic",
+            "harmonic",
+            a.harmonic,
+            "must be in [0, 1]",
+        ));
     }
     if j == 0 || j > 16 {
-        return Err(Error::config("--carriers", "carriers", j, "needs 1 to 16 carriers"));
+        return Err(Error::config(
+            "--carriers",
+            "carriers",
+            j,
+            "needs 1 to 16 carriers",
+        ));
     }
     Ok(())
 }
@@ -210,13 +249,27 @@ fn candidate(label: String, layout: Layout, window: WindowShape, obj: &Objective
 }
 
 /// The paper's layout (its own crop 0.25), the diamond and the designed layouts of every crop.
-fn candidates(a: &CarrierArgs, j: usize, obj: &Objective, notes: &mut Vec<String>) -> Result<Vec<Candidate>> {
+fn candidates(
+    a: &CarrierArgs,
+    j: usize,
+    obj: &Objective,
+    notes: &mut Vec<String>,
+) -> Result<Vec<Candidate>> {
     let n = a.size;
     let square = WindowShape::Square;
     let mut paper = Layout::paper_default(n, 0.25);
     paper.bins.truncate(j);
-    let mut out = vec![candidate("paper default (crop 0.25)".into(), paper, square, obj)];
-    let windows = a.window.iter().map(|w| parse_window(w)).collect::<Result<Vec<_>>>()?;
+    let mut out = vec![candidate(
+        "paper default (crop 0.25)".into(),
+        paper,
+        square,
+        obj,
+    )];
+    let windows = a
+        .window
+        .iter()
+        .map(|w| parse_window(w))
+        .collect::<Result<Vec<_>>>()?;
     let bar = progress::bar("searching layouts");
     for &crop in &a.crop {
         let mut starts = Vec::new();
@@ -243,7 +296,12 @@ fn candidates(a: &CarrierArgs, j: usize, obj: &Objective, notes: &mut Vec<String
     }
     bar.finish_and_clear();
     if !out.iter().any(|c| c.label.starts_with("designed")) {
-        return Err(Error::config("--guard", "guard", format!("{:?}", a.guard), "no feasible layout was found at any crop; relax the guard or reduce the crop"));
+        return Err(Error::config(
+            "--guard",
+            "guard",
+            format!("{:?}", a.guard),
+            "no feasible layout was found at any crop; relax the guard or reduce the crop",
+        ));
     }
     Ok(out)
 }
@@ -256,20 +314,40 @@ fn experiment_for(scene: &Experiment, c: &Candidate, coherent: bool) -> Experime
     e.reconstruct.window = c.window;
     if coherent {
         let [w, h] = e.scene.size;
-        e.rig.dmd = Some(DmdConfig { width: w, height: h, ..Default::default() });
-        e.rig.fourier_filter = Some(FourierFilterConfig { illumination: Illumination::Coherent, ..Default::default() });
+        e.rig.dmd = Some(DmdConfig {
+            width: w,
+            height: h,
+            ..Default::default()
+        });
+        e.rig.fourier_filter = Some(FourierFilterConfig {
+            illumination: Illumination::Coherent,
+            ..Default::default()
+        });
     }
     e
 }
 
 /// Simulate the candidates `which` on the simulation scenes (ideal, or coherent).
-fn simulate(cands: &mut [Candidate], which: &[usize], sims: &[Experiment], coherent: bool, lib: &Library) -> Result<()> {
-    let bar = progress::bar(if coherent { "simulating (coherent 4f)" } else { "simulating (ideal)" });
+fn simulate(
+    cands: &mut [Candidate],
+    which: &[usize],
+    sims: &[Experiment],
+    coherent: bool,
+    lib: &Library,
+) -> Result<()> {
+    let bar = progress::bar(if coherent {
+        "simulating (coherent 4f)"
+    } else {
+        "simulating (ideal)"
+    });
     bar.set_length((which.len() * sims.len()) as u64);
     for &i in which {
         let mut out = Vec::new();
         for s in sims {
-            out.push(scenes::simulate(&experiment_for(s, &cands[i], coherent), lib)?);
+            out.push(scenes::simulate(
+                &experiment_for(s, &cands[i], coherent),
+                lib,
+            )?);
             bar.inc(1);
         }
         if coherent {
@@ -290,7 +368,9 @@ fn choose(cands: &[Candidate]) -> usize {
         .filter(|&i| i == 0 || cands[i].label.starts_with("designed"))
         .max_by(|&a, &b| {
             let (ka, kb) = (key(a), key(b));
-            ka.0.total_cmp(&kb.0).then(ka.1.total_cmp(&kb.1)).then(b.cmp(&a))
+            ka.0.total_cmp(&kb.0)
+                .then(ka.1.total_cmp(&kb.1))
+                .then(b.cmp(&a))
         })
         .unwrap_or(0)
 }
@@ -306,17 +386,31 @@ pub fn design(a: &CarrierArgs, lib: &Library) -> Result<CarrierDesign> {
     let scenes = design_scenes(a, &base)?;
     let (spectra, weights) = measure(&scenes, &base, a.size, lib)?;
     let t_measure = t0.elapsed().as_secs_f64();
-    let obj = Objective { scenes: &spectra, weights, a2: a.harmonic * a.harmonic };
+    let obj = Objective {
+        scenes: &spectra,
+        weights,
+        a2: a.harmonic * a.harmonic,
+    };
     let mut notes = Vec::new();
     let t = Instant::now();
     let mut cands = candidates(a, j, &obj, &mut notes)?;
     let t_search = t.elapsed().as_secs_f64();
-    let sims: Vec<Experiment> = scenes.iter().filter(|e| e.scene.size == [a.size, a.size]).cloned().collect();
+    let sims: Vec<Experiment> = scenes
+        .iter()
+        .filter(|e| e.scene.size == [a.size, a.size])
+        .cloned()
+        .collect();
     if sims.is_empty() {
         return Err(Error::config("--size", "size", a.size, "no design scene has this size, so no layout can be simulated; give --size the cubes' size"));
     }
     for e in scenes.iter().filter(|e| e.scene.size != [a.size, a.size]) {
-        notes.push(format!("{} ({}×{}) scores the prediction only: the layout is on a {}-point grid", scenes::label(e), e.scene.size[0], e.scene.size[1], a.size));
+        notes.push(format!(
+            "{} ({}×{}) scores the prediction only: the layout is on a {}-point grid",
+            scenes::label(e),
+            e.scene.size[0],
+            e.scene.size[1],
+            a.size
+        ));
     }
     let t = Instant::now();
     let all: Vec<usize> = (0..cands.len()).collect();
@@ -333,16 +427,24 @@ pub fn design(a: &CarrierArgs, lib: &Library) -> Result<CarrierDesign> {
     }
     let t_coh = t.elapsed().as_secs_f64();
     let n2 = (a.size * a.size) as f64;
-    let spectrum = (0..a.size * a.size).map(|k| spectra.iter().map(|s| s.mean_power[k]).sum::<f64>() / n2).collect();
+    let spectrum = (0..a.size * a.size)
+        .map(|k| spectra.iter().map(|s| s.mean_power[k]).sum::<f64>() / n2)
+        .collect();
     Ok(CarrierDesign {
         design_scenes: spectra.iter().map(|s| s.name.clone()).collect(),
         simulation_scenes: sims.iter().map(scenes::label).collect(),
         candidates: cands,
         chosen,
         notes,
-        seconds: [("measure", t_measure), ("search", t_search), ("simulate", t_sim), ("coherent", t_coh), ("total", t0.elapsed().as_secs_f64())]
-            .map(|(k, v)| (k.to_string(), v))
-            .to_vec(),
+        seconds: [
+            ("measure", t_measure),
+            ("search", t_search),
+            ("simulate", t_sim),
+            ("coherent", t_coh),
+            ("total", t0.elapsed().as_secs_f64()),
+        ]
+        .map(|(k, v)| (k.to_string(), v))
+        .to_vec(),
         spectrum,
     })
 }
@@ -353,14 +455,26 @@ pub fn run(a: &CarrierArgs, lib: &Library) -> Result<String> {
     let mut t = layout_table(&d);
     t += &crosstalk_table(&d);
     t += &write_outputs(a, &d)?;
-    let times: Vec<String> = d.seconds.iter().map(|(k, v)| format!("{k} {v:.2} s")).collect();
-    t += &format!("time: {} (search: heuristic coordinate descent, {} random starts)\n", times.join(", "), a.restarts);
+    let times: Vec<String> = d
+        .seconds
+        .iter()
+        .map(|(k, v)| format!("{k} {v:.2} s"))
+        .collect();
+    t += &format!(
+        "time: {} (search: heuristic coordinate descent, {} random starts)\n",
+        times.join(", "),
+        a.restarts
+    );
     Ok(t)
 }
 
 /// Every candidate: predicted objective, final-cube PSNR / SAM per scene, gain over the paper's.
 fn layout_table(d: &CarrierDesign) -> String {
-    let mut t = format!("design scenes: {}\nsimulated on: {}\n", d.design_scenes.join(", "), d.simulation_scenes.join(", "));
+    let mut t = format!(
+        "design scenes: {}\nsimulated on: {}\n",
+        d.design_scenes.join(", "),
+        d.simulation_scenes.join(", ")
+    );
     for n in &d.notes {
         t += &format!("note: {n}\n");
     }
@@ -380,13 +494,20 @@ fn layout_table(d: &CarrierDesign) -> String {
     }
     let c = &d.candidates[d.chosen];
     t += &format!("(final cube PSNR dB / SAM °; gains in dB over the paper's layout)\nchosen: {} bins {:?} on {}², crop {}\n", c.label, c.layout.bins, c.layout.size, c.layout.crop());
-    let coh: Vec<&Candidate> = d.candidates.iter().filter(|c| !c.coherent.is_empty()).collect();
+    let coh: Vec<&Candidate> = d
+        .candidates
+        .iter()
+        .filter(|c| !c.coherent.is_empty())
+        .collect();
     if !coh.is_empty() {
         t += "\ncoherent 4f patterns (DMD Floyd–Steinberg + Fourier filter), final cube PSNR dB / SAM °:\n";
         for c in coh {
             t += &format!("{:<38}", c.label);
             for o in &c.coherent {
-                t += &format!(" {}: {:.2} / {:.2};", o.scene, o.cube_psnr_db, o.cube_sam_deg);
+                t += &format!(
+                    " {}: {:.2} / {:.2};",
+                    o.scene, o.cube_psnr_db, o.cube_sam_deg
+                );
             }
             t += "\n";
         }
@@ -398,13 +519,21 @@ fn layout_table(d: &CarrierDesign) -> String {
 /// simulation scene, for the paper's layout, the diamond and the chosen one.
 fn crosstalk_table(d: &CarrierDesign) -> String {
     let mut which = vec![0];
-    which.extend(d.candidates.iter().position(|c| c.label.starts_with("diamond")));
+    which.extend(
+        d.candidates
+            .iter()
+            .position(|c| c.label.starts_with("diamond")),
+    );
     if d.chosen != 0 {
         which.push(d.chosen);
     }
-    let mut t = String::from("\ncrosstalk per channel, dB below peak² (higher = less leak), predicted / simulated:\n");
+    let mut t = String::from(
+        "\ncrosstalk per channel, dB below peak² (higher = less leak), predicted / simulated:\n",
+    );
     for (k, scene) in d.simulation_scenes.iter().enumerate() {
-        let Some(p) = d.design_scenes.iter().position(|s| s == scene) else { continue };
+        let Some(p) = d.design_scenes.iter().position(|s| s == scene) else {
+            continue;
+        };
         t += &format!("{scene}:\n{:<8}", "channel");
         for &i in &which {
             t += &format!(" {:>30}", d.candidates[i].label);
@@ -415,7 +544,10 @@ fn crosstalk_table(d: &CarrierDesign) -> String {
             for &i in &which {
                 let c = &d.candidates[i];
                 let sim = c.ideal[k].leak_db.as_ref().map_or(f64::NAN, |v| v[ch]);
-                t += &format!(" {:>30}", format!("{:.1} / {:.1}", c.predicted_db[p][ch], sim));
+                t += &format!(
+                    " {:>30}",
+                    format!("{:.1} / {:.1}", c.predicted_db[p][ch], sim)
+                );
             }
             t += "\n";
         }
@@ -427,31 +559,59 @@ fn crosstalk_table(d: &CarrierDesign) -> String {
 fn write_outputs(a: &CarrierArgs, d: &CarrierDesign) -> Result<String> {
     let mut t = String::from("\n");
     let c = &d.candidates[d.chosen];
-    let shape = serde_json::to_value(c.window).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default();
-    let section = format!("# specmux design carriers: {} on the scenes {}\n{}", c.label, d.design_scenes.join(", "), c.layout.toml(&shape));
+    let shape = serde_json::to_value(c.window)
+        .ok()
+        .and_then(|v| v.as_str().map(String::from))
+        .unwrap_or_default();
+    let section = format!(
+        "# specmux design carriers: {} on the scenes {}\n{}",
+        c.label,
+        d.design_scenes.join(", "),
+        c.layout.toml(&shape)
+    );
     specmux_io::atomic::write_bytes(&a.out.join("carriers.toml"), section.as_bytes())?;
     let base = crate::filters::base_experiment(a.experiment.as_deref())?;
-    let sim = design_scenes(a, &base)?.into_iter().find(|e| e.scene.size == [a.size, a.size]);
-    if let Some(s) = sim.filter(|s| scenes::is_procedural(s)) {
+    let sim = design_scenes(a, &base)?
+        .into_iter()
+        .find(|e| e.scene.size == [a.size, a.size]);
+    if let Some(s) = sim.filter(scenes::is_procedural) {
         let e = experiment_for(&s, c, false);
-        let text = toml::to_string(&e).map_err(|err| Error::Toml { file: "experiment.toml".into(), msg: err.to_string() })?;
+        let text = toml::to_string(&e).map_err(|err| Error::Toml {
+            file: "experiment.toml".into(),
+            msg: err.to_string(),
+        })?;
         let path = a.out.join("experiment.toml");
         Experiment::from_toml(&text, &path.display().to_string())?;
         specmux_io::atomic::write_bytes(&path, text.as_bytes())?;
-        t += &format!("wrote {} (runs as it is: specmux demo --scene {})\n", path.display(), path.display());
+        t += &format!(
+            "wrote {} (runs as it is: specmux demo --scene {})\n",
+            path.display(),
+            path.display()
+        );
     }
     let mut which = vec![0, d.chosen];
-    which.extend(d.candidates.iter().position(|c| c.label.starts_with("diamond")));
+    which.extend(
+        d.candidates
+            .iter()
+            .position(|c| c.label.starts_with("diamond")),
+    );
     which.dedup();
     for i in which {
         let c = &d.candidates[i];
         let name = c.label.split(' ').next().unwrap_or("layout");
         let path = a.out.join(format!("fourier_{name}.png"));
-        let title = format!("{} on {}²: windows, harmonics, scene spectrum", c.label, a.size);
+        let title = format!(
+            "{} on {}²: windows, harmonics, scene spectrum",
+            c.label, a.size
+        );
         plot::fourier_plane(&path, &title, &c.layout, &d.spectrum)?;
         t += &format!("wrote {}\n", path.display());
     }
     specmux_io::json::write_json(&a.out.join("report.json"), d)?;
-    t += &format!("wrote {} and {}\n", a.out.join("carriers.toml").display(), a.out.join("report.json").display());
+    t += &format!(
+        "wrote {} and {}\n",
+        a.out.join("carriers.toml").display(),
+        a.out.join("report.json").display()
+    );
     Ok(t)
 }

@@ -113,14 +113,29 @@ impl Families {
             ));
         }
         if !(self.floor >= 0.0 && self.floor < self.peak) {
-            return Err(Error::config(file, "floor", self.floor, "needs 0 ≤ floor < peak"));
+            return Err(Error::config(
+                file,
+                "floor",
+                self.floor,
+                "needs 0 ≤ floor < peak",
+            ));
         }
         if let Some(f) = self.gaussian_fwhm_nm.iter().find(|f| !ok(**f)) {
-            return Err(Error::config(file, "gaussian_fwhm_nm", f, "must be positive"));
+            return Err(Error::config(
+                file,
+                "gaussian_fwhm_nm",
+                f,
+                "must be positive",
+            ));
         }
         if let Some(b) = self.dichroic_bands_nm.iter().find(|b| !(b[1] > b[0])) {
             let v = format!("[{}, {}]", b[0], b[1]);
-            return Err(Error::config(file, "dichroic_bands_nm", v, "needs cut-on < cut-off"));
+            return Err(Error::config(
+                file,
+                "dichroic_bands_nm",
+                v,
+                "needs cut-on < cut-off",
+            ));
         }
         Ok(())
     }
@@ -158,12 +173,7 @@ impl Families {
 }
 
 /// One generated curve sampled every nanometre, with its provenance line.
-fn generated(
-    id: &str,
-    what: &str,
-    fam: &Families,
-    t: impl Fn(f64) -> f64,
-) -> Result<Candidate> {
+fn generated(id: &str, what: &str, fam: &Families, t: impl Fn(f64) -> f64) -> Result<Candidate> {
     let (lo, hi) = GEN_RANGE_NM;
     let wl: Vec<f64> = (0..=(hi - lo) as usize).map(|k| lo + k as f64).collect();
     let v = wl.iter().map(|&l| t(l)).collect();
@@ -243,7 +253,11 @@ pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathB
 }
 
 /// The catalogue: the measured curves under `dir` (none when `dir` is None) and the families.
-pub fn load(dir: Option<&Path>, families: Option<&Families>, lib: &Library) -> Result<Vec<Candidate>> {
+pub fn load(
+    dir: Option<&Path>,
+    families: Option<&Families>,
+    lib: &Library,
+) -> Result<Vec<Candidate>> {
     let mut all = match dir {
         Some(d) => measured(d, lib)?,
         None => Vec::new(),
@@ -263,7 +277,10 @@ mod tests {
         let lib = Library::default_root();
         let m = measured(&lib.root, &lib).unwrap();
         let names: Vec<&str> = m.iter().map(|c| c.name.as_str()).collect();
-        assert!(names.contains(&"wheel/red") && names.contains(&"paper/c"), "{names:?}");
+        assert!(
+            names.contains(&"wheel/red") && names.contains(&"paper/c"),
+            "{names:?}"
+        );
         assert_eq!(m.len(), 6, "{names:?}");
         let g = Families::default().generate("t").unwrap();
         assert_eq!(m.len() + g.len(), 40);
@@ -284,6 +301,9 @@ mod tests {
             ..Default::default()
         };
         let e = f.generate("fam.toml").unwrap_err().to_string();
-        assert!(e.contains("fam.toml") && e.contains("dichroic_bands_nm"), "{e}");
+        assert!(
+            e.contains("fam.toml") && e.contains("dichroic_bands_nm"),
+            "{e}"
+        );
     }
 }

@@ -18,12 +18,12 @@
 //! amplitude ½ and halved by taking the real part: var(x̂_i) = 2·crop²·(ȳ·Y/E + σ_r²·Y²/E²), with
 //! ȳ the library's mean frame and Y = 2 Σ white_i the white frame's peak, both in channel units.
 
+use crate::small;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 use specmux_core::spectral::basis::sample_matrix;
 use specmux_core::spectral::{Curve, Grid};
 use specmux_core::unmix::{second_difference, MAX_BASIS};
-use crate::small;
 use specmux_core::{Error, Result};
 
 /// Largest set scored (the unmixer's channel limit).
@@ -217,13 +217,23 @@ impl Evaluator {
         }
         let Some(m) = small::solve_spd(h, j, &f, k) else {
             let inf = f64::INFINITY;
-            return Scores { max_corr, cond, noise_gain: inf, library_rmse: inf, predicted_rmse: inf };
+            return Scores {
+                max_corr,
+                cond,
+                noise_gain: inf,
+                library_rmse: inf,
+                predicted_rmse: inf,
+            };
         };
         // m[a][i] = (H⁻¹Fᵀ)_{a i}; MQ, then tr(K M Q Mᵀ), tr(K M Mᵀ) and tr(M U).
         let mut mq = [[0.0; MAX_K]; MAX_BASIS];
         for a in 0..j {
             for b in 0..k {
-                mq[a][b] = (0..k).map(|i| m[a][i] * self.q[set[i] * self.n + set[b]]).sum::<f64>() * s * s;
+                mq[a][b] = (0..k)
+                    .map(|i| m[a][i] * self.q[set[i] * self.n + set[b]])
+                    .sum::<f64>()
+                    * s
+                    * s;
             }
         }
         let (mut fit, mut kmm, mut mu) = (0.0, 0.0, 0.0);
@@ -282,7 +292,10 @@ pub(crate) mod tests {
         let y_mean: f64 = set.iter().map(|&c| s * ev.mean_x[c]).sum();
         let peak: f64 = 2.0 * set.iter().map(|&c| s * ev.white[c]).sum::<f64>();
         let nm = &ev.noise;
-        let var_x = 2.0 * nm.crop * nm.crop * (y_mean * peak / nm.electrons + (nm.read_noise_e * peak / nm.electrons).powi(2));
+        let var_x = 2.0
+            * nm.crop
+            * nm.crop
+            * (y_mean * peak / nm.electrons + (nm.read_noise_e * peak / nm.electrons).powi(2));
         let gain2 = kmm / ev.bands as f64;
         Scores {
             max_corr: ev.max_corr(set),
@@ -297,26 +310,58 @@ pub(crate) mod tests {
     pub(crate) fn evaluator(extra: usize) -> (Evaluator, Vec<String>) {
         let lib = Library::default_root();
         let mut cat = crate::catalog::measured(&lib.root, &lib).unwrap();
-        cat.extend(crate::catalog::Families::default().generate("t").unwrap().into_iter().step_by(3).take(extra));
+        cat.extend(
+            crate::catalog::Families::default()
+                .generate("t")
+                .unwrap()
+                .into_iter()
+                .step_by(3)
+                .take(extra),
+        );
         let exp = Experiment::prototype();
         let m = Materials::load(&lib).unwrap();
         let rig = Rig::build(&exp, &lib, &m).unwrap();
-        let wheel = ColorWheel { filters: cat.iter().map(|c| c.curve.clone()).collect() };
-        let p = wheel.projection(&rig.grid, rig.illuminant.as_ref(), &rig.qe).unwrap();
+        let wheel = ColorWheel {
+            filters: cat.iter().map(|c| c.curve.clone()).collect(),
+        };
+        let p = wheel
+            .projection(&rig.grid, rig.illuminant.as_ref(), &rig.qe)
+            .unwrap();
         let curves: Vec<_> = cat.iter().map(|c| &c.curve).collect();
-        let noise = NoiseModel { electrons: 1e4, read_noise_e: 3.0, crop: 0.25 };
-        let ev = Evaluator::new(&(p.w / p.scale), &curves, &rig.grid, &rig.basis.vectors, &m.held_out, 200.0 / 1e4, noise).unwrap();
+        let noise = NoiseModel {
+            electrons: 1e4,
+            read_noise_e: 3.0,
+            crop: 0.25,
+        };
+        let ev = Evaluator::new(
+            &(p.w / p.scale),
+            &curves,
+            &rig.grid,
+            &rig.basis.vectors,
+            &m.held_out,
+            200.0 / 1e4,
+            noise,
+        )
+        .unwrap();
         (ev, cat.into_iter().map(|c| c.name).collect())
     }
 
     #[test]
     fn the_fast_scores_equal_the_dense_computation() {
         let (ev, _) = evaluator(6);
-        for set in [vec![0, 1, 2, 3, 4, 5], vec![1, 3, 5, 6, 8, 11], vec![0, 2, 4, 6, 7, 9, 10]] {
+        for set in [
+            vec![0, 1, 2, 3, 4, 5],
+            vec![1, 3, 5, 6, 8, 11],
+            vec![0, 2, 4, 6, 7, 9, 10],
+        ] {
             let (a, b) = (ev.score(&set), score_dense(&ev, &set));
             for k in 0..CRITERIA.len() {
                 let (x, y) = (a.get(k), b.get(k));
-                assert!((x - y).abs() <= 1e-9 * y.abs().max(1.0), "{} {x} {y}", CRITERIA[k]);
+                assert!(
+                    (x - y).abs() <= 1e-9 * y.abs().max(1.0),
+                    "{} {x} {y}",
+                    CRITERIA[k]
+                );
             }
         }
     }
@@ -340,6 +385,10 @@ pub(crate) mod tests {
         let rmse = (e.norm_squared() / e.len() as f64).sqrt();
         let s = ev.score(&[0, 1, 2, 3, 4, 5]);
         // The wheel order differs (catalogue sorted by name), which does not change the error.
-        assert!((s.library_rmse - rmse).abs() < 1e-9, "{} {rmse}", s.library_rmse);
+        assert!(
+            (s.library_rmse - rmse).abs() < 1e-9,
+            "{} {rmse}",
+            s.library_rmse
+        );
     }
 }

@@ -74,13 +74,16 @@ impl Simulated {
     }
 }
 
+/// A ranked set in the report: its value under the criterion, its curves and every score.
+type RankedSet<'a> = (f64, Vec<&'a str>, Scores);
+
 /// The JSON report.
 #[derive(Serialize)]
 struct Report<'a> {
     catalogue: Vec<&'a str>,
     combinations: u64,
     noise: NoiseModel,
-    ranked: Vec<(&'static str, Vec<(f64, Vec<&'a str>, Scores)>)>,
+    ranked: Vec<(&'static str, Vec<RankedSet<'a>>)>,
     simulated: &'a [Simulated],
     chosen: &'a str,
     seconds: Vec<(&'static str, f64)>,
@@ -111,16 +114,19 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
     let dir = a.catalog.clone().unwrap_or_else(|| lib.root.clone());
     let cat = catalog::load(Some(&dir), fam.as_ref(), lib)?;
     if !(1..=16).contains(&a.choose) || a.choose > cat.len() {
-        let why = format!("needs 1 to 16 filters and at most the catalogue's {}", cat.len());
+        let why = format!(
+            "needs 1 to 16 filters and at most the catalogue's {}",
+            cat.len()
+        );
         return Err(Error::config("--choose", "choose", a.choose, &why));
     }
     let keep = a
         .keep
         .iter()
         .map(|k| {
-            cat.iter().position(|c| &c.name == k).ok_or_else(|| {
-                Error::config("--keep", "keep", k, "is not in the catalogue")
-            })
+            cat.iter()
+                .position(|c| &c.name == k)
+                .ok_or_else(|| Error::config("--keep", "keep", k, "is not in the catalogue"))
         })
         .collect::<Result<Vec<_>>>()?;
     let materials = Materials::load(lib)?;
@@ -132,7 +138,12 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
     let w_raw = p.w / p.scale;
     if let Some(i) = (0..cat.len()).find(|&i| !(w_raw.row(i).sum() > 0.0)) {
         let why = "passes no light on the band grid with this light and camera";
-        return Err(Error::config(&dir.display().to_string(), "catalogue", &cat[i].name, why));
+        return Err(Error::config(
+            &dir.display().to_string(),
+            "catalogue",
+            &cat[i].name,
+            why,
+        ));
     }
     let curves: Vec<_> = cat.iter().map(|c| &c.curve).collect();
     let noise = NoiseModel {
@@ -141,7 +152,15 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
         crop: base.reconstruct.crop,
     };
     let eta = base.reconstruct.eta / rig.grid.step_nm.powi(4);
-    let ev = Evaluator::new(&w_raw, &curves, &rig.grid, &rig.basis.vectors, &materials.held_out, eta, noise)?;
+    let ev = Evaluator::new(
+        &w_raw,
+        &curves,
+        &rig.grid,
+        &rig.basis.vectors,
+        &materials.held_out,
+        eta,
+        noise,
+    )?;
     let range_nm = (rig.grid.start_nm - 20.0, rig.grid.end_nm() + 20.0);
     Ok(Setup {
         cat,
@@ -154,7 +173,12 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
 /// Run the command; returns the text to print.
 pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     if !(a.electrons.is_finite() && a.electrons > 0.0) {
-        return Err(Error::config("--electrons", "electrons", a.electrons, "must be positive"));
+        return Err(Error::config(
+            "--electrons",
+            "electrons",
+            a.electrons,
+            "must be positive",
+        ));
     }
     let t0 = Instant::now();
     let base = base_experiment(a.experiment.as_deref())?;
@@ -168,7 +192,10 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     let ranked = search::exhaustive(&s.ev, a.choose, &s.keep, a.top, &bar);
     bar.finish_and_clear();
     let t_all = t.elapsed().as_secs_f64();
-    let combos = search::binomial(s.ev.len() - s.keep.len(), a.choose - s.keep.len().min(a.choose));
+    let combos = search::binomial(
+        s.ev.len() - s.keep.len(),
+        a.choose - s.keep.len().min(a.choose),
+    );
     let mut text = String::new();
     let _ = writeln!(
         text,
@@ -177,7 +204,11 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
         s.cat.iter().filter(|c| c.generated.is_some()).count(),
         combos,
         a.choose,
-        if s.keep.is_empty() { String::new() } else { format!(", keeping {}", a.keep.join(", ")) }
+        if s.keep.is_empty() {
+            String::new()
+        } else {
+            format!(", keeping {}", a.keep.join(", "))
+        }
     );
     let _ = writeln!(text, "exact search: branch and bound on the paper's criterion {t_bnb:.3} s; every combination scored on all criteria {t_all:.2} s (2 cores)\n");
     text += &rank_table(&s, &paper.items, &ranked);
@@ -186,22 +217,62 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     let t_sim = t.elapsed().as_secs_f64();
     let chosen = choose(&sims);
     text += &sim_table(&sims, chosen);
-    let times = vec![("setup", t_setup), ("branch_and_bound", t_bnb), ("exhaustive", t_all), ("simulation", t_sim), ("total", t0.elapsed().as_secs_f64())];
-    text += &write_outputs(a, &s, &sims, chosen, &paper.items, &ranked, combos, &times, lib)?;
+    let times = vec![
+        ("setup", t_setup),
+        ("branch_and_bound", t_bnb),
+        ("exhaustive", t_all),
+        ("simulation", t_sim),
+        ("total", t0.elapsed().as_secs_f64()),
+    ];
+    text += &write_outputs(
+        a,
+        &s,
+        &sims,
+        chosen,
+        &paper.items,
+        &ranked,
+        combos,
+        &times,
+        lib,
+    )?;
     Ok(text)
 }
 
 /// The best sets by each criterion, with every score.
 fn rank_table(s: &Setup, paper: &[Ranked], ranked: &[search::TopK]) -> String {
     let mut t = String::new();
-    let name = |set: &[usize]| set.iter().map(|&i| s.cat[i].name.as_str()).collect::<Vec<_>>().join(", ");
-    let lists = std::iter::once(("max_corr (branch and bound)", paper))
-        .chain(CRITERIA.iter().zip(ranked).skip(1).map(|(c, r)| (*c, r.items.as_slice())));
+    let name = |set: &[usize]| {
+        set.iter()
+            .map(|&i| s.cat[i].name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let lists = std::iter::once(("max_corr (branch and bound)", paper)).chain(
+        CRITERIA
+            .iter()
+            .zip(ranked)
+            .skip(1)
+            .map(|(c, r)| (*c, r.items.as_slice())),
+    );
     for (crit, items) in lists {
-        let _ = writeln!(t, "best by {crit}:\n{:>4} {:>9} {:>9} {:>10} {:>12} {:>14}  set", "rank", "max_corr", "cond(F)", "noise gain", "library RMSE", "predicted RMSE");
+        let _ = writeln!(
+            t,
+            "best by {crit}:\n{:>4} {:>9} {:>9} {:>10} {:>12} {:>14}  set",
+            "rank", "max_corr", "cond(F)", "noise gain", "library RMSE", "predicted RMSE"
+        );
         for (k, r) in items.iter().enumerate() {
             let sc = s.ev.score(&r.set);
-            let _ = writeln!(t, "{:>4} {:>9.4} {:>9.1} {:>10.3} {:>12.5} {:>14.5}  {}", k + 1, sc.max_corr, sc.cond, sc.noise_gain, sc.library_rmse, sc.predicted_rmse, name(&r.set));
+            let _ = writeln!(
+                t,
+                "{:>4} {:>9.4} {:>9.1} {:>10.3} {:>12.5} {:>14.5}  {}",
+                k + 1,
+                sc.max_corr,
+                sc.cond,
+                sc.noise_gain,
+                sc.library_rmse,
+                sc.predicted_rmse,
+                name(&r.set)
+            );
         }
         t.push('\n');
     }
@@ -219,20 +290,32 @@ fn simulate_sets(
 ) -> Result<Vec<Simulated>> {
     let files = scenes::files(&a.scenes, &a.scenes_dir)?;
     let sc = scenes::load(&files, Some(a.size))?;
-    let mut sets: Vec<(String, Vec<String>)> = vec![("base wheel".into(), base.rig.wheel.filters.clone())];
-    let names = |set: &[usize]| set.iter().map(|&i| s.cat[i].name.clone()).collect::<Vec<_>>();
+    let mut sets: Vec<(String, Vec<String>)> =
+        vec![("base wheel".into(), base.rig.wheel.filters.clone())];
+    let names = |set: &[usize]| {
+        set.iter()
+            .map(|&i| s.cat[i].name.clone())
+            .collect::<Vec<_>>()
+    };
     for (tag, list) in [("max_corr", paper), ("predicted_rmse", ours)] {
         for (k, r) in list.iter().take(a.simulate).enumerate() {
             sets.push((format!("{tag} #{}", k + 1), names(&r.set)));
         }
     }
-    let chosen: Vec<&Candidate> = s.cat.iter().filter(|c| sets.iter().any(|(_, f)| f.contains(&c.name))).collect();
+    let chosen: Vec<&Candidate> = s
+        .cat
+        .iter()
+        .filter(|c| sets.iter().any(|(_, f)| f.contains(&c.name)))
+        .collect();
     catalog::write_generated(&chosen, lib)?;
     let bar = progress::bar("simulating sets on scenes");
     bar.set_length((sets.len() * sc.len()) as u64);
     let mut out = Vec::new();
     for (label, filters) in sets {
-        let idx: Option<Vec<usize>> = filters.iter().map(|f| s.cat.iter().position(|c| &c.name == f)).collect();
+        let idx: Option<Vec<usize>> = filters
+            .iter()
+            .map(|f| s.cat.iter().position(|c| &c.name == f))
+            .collect();
         let mut outcomes = Vec::new();
         for e in &sc {
             let mut e = e.clone();
@@ -240,7 +323,12 @@ fn simulate_sets(
             outcomes.push(scenes::simulate(&e, lib)?);
             bar.inc(1);
         }
-        out.push(Simulated { label, scores: idx.map(|i| s.ev.score(&i)), filters, outcomes });
+        out.push(Simulated {
+            label,
+            scores: idx.map(|i| s.ev.score(&i)),
+            filters,
+            outcomes,
+        });
     }
     bar.finish_and_clear();
     Ok(out)
@@ -256,7 +344,8 @@ fn choose(sims: &[Simulated]) -> usize {
 
 /// Final-cube PSNR / SAM of each simulated set on each scene, and ours against the paper's.
 fn sim_table(sims: &[Simulated], chosen: usize) -> String {
-    let mut t = String::from("final cube, simulated (ideal patterns, noiseless; PSNR dB / SAM °):\n");
+    let mut t =
+        String::from("final cube, simulated (ideal patterns, noiseless; PSNR dB / SAM °):\n");
     let Some(first) = sims.first() else { return t };
     let _ = write!(t, "{:<18}", "set");
     for o in &first.outcomes {
@@ -274,11 +363,22 @@ fn sim_table(sims: &[Simulated], chosen: usize) -> String {
         let c = &sims[chosen];
         let _ = write!(t, "\n{} − max_corr #1 (dB / °):", c.label);
         for (a, b) in c.outcomes.iter().zip(&p.outcomes) {
-            let _ = write!(t, " {}: {:+.2} / {:+.2};", a.scene, a.cube_psnr_db - b.cube_psnr_db, a.cube_sam_deg - b.cube_sam_deg);
+            let _ = write!(
+                t,
+                " {}: {:+.2} / {:+.2};",
+                a.scene,
+                a.cube_psnr_db - b.cube_psnr_db,
+                a.cube_sam_deg - b.cube_sam_deg
+            );
         }
         t.push('\n');
     }
-    let _ = writeln!(t, "chosen: {} = {}", sims[chosen].label, sims[chosen].filters.join(", "));
+    let _ = writeln!(
+        t,
+        "chosen: {} = {}",
+        sims[chosen].label,
+        sims[chosen].filters.join(", ")
+    );
     t
 }
 
@@ -305,28 +405,60 @@ fn write_outputs(
     );
     specmux_io::atomic::write_bytes(&a.out.join("wheel.toml"), toml.as_bytes())?;
     let mut text = String::new();
-    for sim in sims.iter().filter(|x| x.label.ends_with("#1") || x.label == c.label) {
-        let curves: Vec<_> = sim.filters.iter().map(|f| lib.curve(f)).collect::<Result<_>>()?;
+    for sim in sims
+        .iter()
+        .filter(|x| x.label.ends_with("#1") || x.label == c.label)
+    {
+        let curves: Vec<_> = sim
+            .filters
+            .iter()
+            .map(|f| lib.curve(f))
+            .collect::<Result<_>>()?;
         let file = format!("curves_{}.png", sim.label.replace([' ', '#'], ""));
         let refs: Vec<_> = curves.iter().collect();
-        plot::curves(&a.out.join(&file), &format!("Filter set: {}", sim.label), &refs, s.range_nm)?;
+        plot::curves(
+            &a.out.join(&file),
+            &format!("Filter set: {}", sim.label),
+            &refs,
+            s.range_nm,
+        )?;
         let _ = writeln!(text, "wrote {}", a.out.join(file).display());
     }
-    let names = |set: &[usize]| set.iter().map(|&i| s.cat[i].name.as_str()).collect::<Vec<_>>();
-    let rank = |items: &[Ranked]| items.iter().map(|r| (r.value, names(&r.set), s.ev.score(&r.set))).collect::<Vec<_>>();
+    let names = |set: &[usize]| {
+        set.iter()
+            .map(|&i| s.cat[i].name.as_str())
+            .collect::<Vec<_>>()
+    };
+    let rank = |items: &[Ranked]| {
+        items
+            .iter()
+            .map(|r| (r.value, names(&r.set), s.ev.score(&r.set)))
+            .collect::<Vec<_>>()
+    };
     let report = Report {
         catalogue: s.cat.iter().map(|c| c.name.as_str()).collect(),
         combinations: combos,
         noise: s.ev.noise,
         ranked: std::iter::once(("max_corr", rank(paper)))
-            .chain(CRITERIA.iter().zip(ranked).skip(1).map(|(n, r)| (*n, rank(&r.items))))
+            .chain(
+                CRITERIA
+                    .iter()
+                    .zip(ranked)
+                    .skip(1)
+                    .map(|(n, r)| (*n, rank(&r.items))),
+            )
             .collect(),
         simulated: sims,
         chosen: &c.label,
         seconds: seconds.to_vec(),
     };
     specmux_io::json::write_json(&a.out.join("report.json"), &report)?;
-    let _ = writeln!(text, "wrote {} and {}", a.out.join("wheel.toml").display(), a.out.join("report.json").display());
+    let _ = writeln!(
+        text,
+        "wrote {} and {}",
+        a.out.join("wheel.toml").display(),
+        a.out.join("report.json").display()
+    );
     for (k, v) in seconds {
         let _ = write!(text, "{k} {v:.2} s; ");
     }

@@ -122,7 +122,10 @@ impl Layout {
                     .iter()
                     .position(|&(cx, cy)| cdist(sx, cx, n) <= h && cdist(sy, cy, n) <= h);
                 if let Some(k) = hit {
-                    return Some(format!("{term} at bin ({sx},{sy}) lies in the {} window", names(k)));
+                    return Some(format!(
+                        "{term} at bin ({sx},{sy}) lies in the {} window",
+                        names(k)
+                    ));
                 }
             }
         }
@@ -186,7 +189,11 @@ impl Layout {
             }
         }
         let ring = |&(x, y): &(i64, i64)| ((x.abs() + y.abs()), (y as f64).atan2(x as f64));
-        sites.sort_by(|a, b| ring(a).partial_cmp(&ring(b)).unwrap_or(std::cmp::Ordering::Equal));
+        sites.sort_by(|a, b| {
+            ring(a)
+                .partial_cmp(&ring(b))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
         let axial_ok = |&(x, y): &(i64, i64)| (x != 0 && y != 0) || 4 * (x.abs() + y.abs()) <= n;
         for (strict, note) in [(true, None), (false, Some(format!("the diamond rule's axial limit fs/4 cannot hold with {count} carriers at crop {crop}: axial carriers beyond it were admitted")))] {
             let mut l = Layout { size, window: w as usize, bins: Vec::new() };
@@ -237,7 +244,10 @@ mod tests {
         l.bins[2] = (70, 10); // next to carrier 0 at (64, 0)
         assert!(!l.feasible(Guard::None));
         let e = l.check(Guard::None, "d.toml").unwrap_err().to_string();
-        assert!(e.contains("+ω0") && e.contains("+ω2") && e.contains("overlap"), "{e}");
+        assert!(
+            e.contains("+ω0") && e.contains("+ω2") && e.contains("overlap"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -262,7 +272,10 @@ mod tests {
         let w = d.window as i64;
         for &(x, y) in &d.bins {
             assert_eq!((x / w + y / w) % 2, 0);
-            assert!(x != 0 && y != 0 || 4 * (x.abs() + y.abs()) <= 256, "{x},{y}");
+            assert!(
+                x != 0 && y != 0 || 4 * (x.abs() + y.abs()) <= 256,
+                "{x},{y}"
+            );
         }
         let (d, note) = Layout::diamond(256, 0.2, 6).unwrap();
         assert!(note.is_some() && d.bins.len() == 6);

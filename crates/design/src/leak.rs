@@ -30,9 +30,9 @@ impl PeriodicSums {
         let mut s = vec![0.0; (n + 1) * (n + 1)];
         for y in 0..n {
             for x in 0..n {
-                s[(y + 1) * (n + 1) + x + 1] = table[y * n + x] + s[y * (n + 1) + x + 1]
-                    + s[(y + 1) * (n + 1) + x]
-                    - s[y * (n + 1) + x];
+                s[(y + 1) * (n + 1) + x + 1] =
+                    table[y * n + x] + s[y * (n + 1) + x + 1] + s[(y + 1) * (n + 1) + x]
+                        - s[y * (n + 1) + x];
             }
         }
         PeriodicSums { n, s }
@@ -109,7 +109,9 @@ impl SceneSpectra {
         let (w, h) = (x.width, x.height);
         let peak = x.max() as f64;
         if !(peak > 0.0) || x.planes == 0 {
-            return Err(Error::Numerical(format!("scene {name}: its channels are dark")));
+            return Err(Error::Numerical(format!(
+                "scene {name}: its channels are dark"
+            )));
         }
         let fft = Fft2::new(w, h);
         // MSE = 2 E / (w h)²; energy per design bin is the scene's bin energy × (w h)/(n n).
@@ -170,7 +172,14 @@ impl Objective<'_> {
     /// The whole cost.
     pub fn cost(&self, l: &Layout) -> f64 {
         (0..l.bins.len())
-            .map(|t| self.weights[t] * self.scenes.iter().map(|s| s.leak_into(l, t, self.a2)).sum::<f64>())
+            .map(|t| {
+                self.weights[t]
+                    * self
+                        .scenes
+                        .iter()
+                        .map(|s| s.leak_into(l, t, self.a2))
+                        .sum::<f64>()
+            })
             .sum()
     }
 
@@ -229,7 +238,9 @@ mod tests {
             n,
             n,
             2,
-            (0..2 * n * n).map(|i| ((i * 7919) % 97) as f32 / 97.0).collect(),
+            (0..2 * n * n)
+                .map(|i| ((i * 7919) % 97) as f32 / 97.0)
+                .collect(),
         )
         .unwrap();
         let s = [SceneSpectra::measure("t", &x, n).unwrap()];
@@ -247,6 +258,9 @@ mod tests {
         b.bins[1] = (-8, 10);
         let whole = o.cost(&b) - o.cost(&a);
         let part = o.partial(&b, 1) - o.partial(&a, 1);
-        assert!((whole - part).abs() < 1e-12 * o.cost(&a).max(1.0), "{whole} {part}");
+        assert!(
+            (whole - part).abs() < 1e-12 * o.cost(&a).max(1.0),
+            "{whole} {part}"
+        );
     }
 }

@@ -32,7 +32,13 @@ pub fn lattice(size: usize, step: usize) -> Vec<(i64, i64)> {
 }
 
 /// Move carrier `i` to the best feasible site of `sites`; true if the cost fell.
-fn best_move(l: &mut Layout, i: usize, sites: &[(i64, i64)], obj: &Objective, guard: Guard) -> bool {
+fn best_move(
+    l: &mut Layout,
+    i: usize,
+    sites: &[(i64, i64)],
+    obj: &Objective,
+    guard: Guard,
+) -> bool {
     let old = l.bins[i];
     let mut best = (obj.partial(l, i), old);
     for &s in sites {
@@ -54,10 +60,17 @@ fn best_move(l: &mut Layout, i: usize, sites: &[(i64, i64)], obj: &Objective, gu
 }
 
 /// Coordinate descent from `start` over `sites`, then a unit-step polish.
-pub fn descend(start: Layout, sites: &[(i64, i64)], step: usize, obj: &Objective, guard: Guard) -> Layout {
+pub fn descend(
+    start: Layout,
+    sites: &[(i64, i64)],
+    step: usize,
+    obj: &Objective,
+    guard: Guard,
+) -> Layout {
     let mut l = start;
     for _ in 0..MAX_SWEEPS {
-        let moved = (0..l.bins.len()).fold(false, |m, i| best_move(&mut l, i, sites, obj, guard) | m);
+        let moved =
+            (0..l.bins.len()).fold(false, |m, i| best_move(&mut l, i, sites, obj, guard) | m);
         if !moved {
             break;
         }
@@ -80,7 +93,12 @@ pub fn descend(start: Layout, sites: &[(i64, i64)], step: usize, obj: &Objective
 }
 
 /// A random feasible layout: carriers placed one by one on the first free site of a shuffle.
-fn random_start(template: &Layout, sites: &[(i64, i64)], guard: Guard, seed: u64) -> Option<Layout> {
+fn random_start(
+    template: &Layout,
+    sites: &[(i64, i64)],
+    guard: Guard,
+    seed: u64,
+) -> Option<Layout> {
     let mut rng = Pcg64::seed_from_u64(seed);
     let mut order = sites.to_vec();
     order.shuffle(&mut rng);

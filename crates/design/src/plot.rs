@@ -17,6 +17,9 @@ const SQUARE: (u32, u32) = (1000, 716);
 /// Width of the legend column on the right.
 const LEGEND_W: u32 = 300;
 
+/// A drawing area of the in-memory bitmap.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
 fn err(path: &Path) -> impl Fn(String) -> Error + '_ {
     move |msg| Error::Image {
         path: path.to_path_buf(),
@@ -28,10 +31,7 @@ fn err(path: &Path) -> impl Fn(String) -> Error + '_ {
 fn render(
     path: &Path,
     (w, h): (u32, u32),
-    draw: impl FnOnce(
-        &DrawingArea<BitMapBackend, Shift>,
-        &DrawingArea<BitMapBackend, Shift>,
-    ) -> std::result::Result<(), String>,
+    draw: impl FnOnce(&Area, &Area) -> std::result::Result<(), String>,
 ) -> Result<()> {
     register_font(path)?;
     let mut buf = vec![0u8; (w * h * 3) as usize];
@@ -47,10 +47,7 @@ fn render(
 }
 
 /// One legend entry per (label, style) in the legend column, from the top.
-fn legend(
-    area: &DrawingArea<BitMapBackend, Shift>,
-    entries: &[(String, ShapeStyle)],
-) -> std::result::Result<(), String> {
+fn legend(area: &Area, entries: &[(String, ShapeStyle)]) -> std::result::Result<(), String> {
     let font = ("sans-serif", 15).into_font();
     for (k, (label, style)) in entries.iter().enumerate() {
         let y = 60 + 24 * k as i32;
@@ -158,34 +155,53 @@ fn draw_windows(
         [-1.0, 0.0, 1.0]
             .into_iter()
             .flat_map(|dx| [-1.0, 0.0, 1.0].map(|dy| (cx + dx, cy + dy)))
-            .filter(|&(x, y)| (x - half < 0.5 && x + half > -0.5) && (y - half < 0.5 && y + half > -0.5))
+            .filter(|&(x, y)| {
+                (x - half < 0.5 && x + half > -0.5) && (y - half < 0.5 && y + half > -0.5)
+            })
             .map(move |(x, y)| {
-                let corners = [(clip(x - half), clip(y - half)), (clip(x + half), clip(y + half))];
+                let corners = [
+                    (clip(x - half), clip(y - half)),
+                    (clip(x + half), clip(y + half)),
+                ];
                 Rectangle::new(corners, style)
             })
             .collect::<Vec<_>>()
     };
     let e = |e: DrawingAreaErrorKind<_>| e.to_string();
     let mut entries = vec![("DC window".to_string(), BLACK.stroke_width(2))];
-    chart.draw_series(rect(0.0, 0.0, BLACK.stroke_width(2))).map_err(e)?;
+    chart
+        .draw_series(rect(0.0, 0.0, BLACK.stroke_width(2)))
+        .map_err(e)?;
     for (i, &(bx, by)) in layout.bins.iter().enumerate() {
         let c = Palette99::pick(i).to_rgba();
         let (fx, fy) = (bx as f64 / n, by as f64 / n);
         chart
-            .draw_series(rect(fx, fy, c.stroke_width(3)).into_iter().chain(rect(-fx, -fy, c.stroke_width(1))))
+            .draw_series(rect(fx, fy, c.stroke_width(3)).into_iter().chain(rect(
+                -fx,
+                -fy,
+                c.stroke_width(1),
+            )))
             .map_err(e)?;
         let h = (wrap(2.0 * fx), wrap(2.0 * fy));
         let marks = [h, (-h.0, -h.1)].map(|p| Cross::new(p, 6, c.stroke_width(2)));
         chart.draw_series(marks).map_err(e)?;
-        entries.push((format!("ω{i} = ({bx}, {by})/{} (+ thick, − thin)", layout.size), c.stroke_width(3)));
+        entries.push((
+            format!("ω{i} = ({bx}, {by})/{} (+ thick, − thin)", layout.size),
+            c.stroke_width(3),
+        ));
     }
     let terms = layout.intermodulation();
     chart
-        .draw_series(terms.iter().map(|&(x, y)| {
-            Circle::new((x as f64 / n, y as f64 / n), 4, BLACK.stroke_width(1))
-        }))
+        .draw_series(
+            terms
+                .iter()
+                .map(|&(x, y)| Circle::new((x as f64 / n, y as f64 / n), 4, BLACK.stroke_width(1))),
+        )
         .map_err(e)?;
-    entries.push(("× 2ω_i harmonic (colour of i)".into(), BLACK.stroke_width(1)));
+    entries.push((
+        "× 2ω_i harmonic (colour of i)".into(),
+        BLACK.stroke_width(1),
+    ));
     entries.push(("○ ω_i ± ω_j".into(), BLACK.stroke_width(1)));
     Ok(entries)
 }

@@ -173,7 +173,9 @@ pub fn exhaustive(
             bar.inc(count);
             t
         })
-        .reduce(empty, |a, b| a.into_iter().zip(b).map(|(x, y)| x.merge(y)).collect())
+        .reduce(empty, |a, b| {
+            a.into_iter().zip(b).map(|(x, y)| x.merge(y)).collect()
+        })
 }
 
 fn record(t: &mut [TopK], s: &Scores, set: &[usize]) {
@@ -204,13 +206,21 @@ mod tests {
     use crate::criteria::tests::evaluator;
 
     /// Every combination, sorted by (value, set): the obvious answer.
-    fn brute(ev: &Evaluator, choose: usize, keep: &[usize], value: impl Fn(&[usize]) -> f64) -> Vec<Ranked> {
+    fn brute(
+        ev: &Evaluator,
+        choose: usize,
+        keep: &[usize],
+        value: impl Fn(&[usize]) -> f64,
+    ) -> Vec<Ranked> {
         let (free, need) = split(ev.len(), choose, keep);
         let mut all = Vec::new();
         each(&free, need, &mut keep.to_vec(), &mut |s| {
             let mut set = s.to_vec();
             set.sort_unstable();
-            all.push(Ranked { value: value(&set), set });
+            all.push(Ranked {
+                value: value(&set),
+                set,
+            });
         });
         all.retain(|r| r.value.is_finite());
         all.sort_by(|a, b| a.value.total_cmp(&b.value).then_with(|| a.set.cmp(&b.set)));
@@ -223,7 +233,11 @@ mod tests {
         for (choose, keep) in [(4, vec![]), (6, vec![]), (5, vec![0, 1, 2])] {
             let want = brute(&ev, choose, &keep, |s| ev.max_corr(s));
             let got = minimax_correlation(&ev, choose, &keep, 7);
-            assert_eq!(got.items, want[..7].to_vec(), "choose {choose} keep {keep:?}");
+            assert_eq!(
+                got.items,
+                want[..7].to_vec(),
+                "choose {choose} keep {keep:?}"
+            );
         }
     }
 

@@ -7,9 +7,15 @@ use specmux_core::unmix::MAX_BASIS;
 /// Smallest and largest eigenvalue of the leading n × n block of a symmetric matrix (cyclic
 /// Jacobi rotations until the off-diagonal mass is negligible).
 pub fn eigen_range(mut a: [[f64; MAX_BASIS]; MAX_BASIS], n: usize) -> (f64, f64) {
-    let scale: f64 = (0..n).map(|i| a[i][i].abs()).sum::<f64>().max(f64::MIN_POSITIVE);
+    let scale: f64 = (0..n)
+        .map(|i| a[i][i].abs())
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE);
     for _ in 0..60 {
-        let off: f64 = (0..n).flat_map(|p| (p + 1..n).map(move |q| (p, q))).map(|(p, q)| a[p][q] * a[p][q]).sum();
+        let off: f64 = (0..n)
+            .flat_map(|p| (p + 1..n).map(move |q| (p, q)))
+            .map(|(p, q)| a[p][q] * a[p][q])
+            .sum();
         if off.sqrt() <= 1e-15 * scale {
             break;
         }
@@ -36,7 +42,9 @@ pub fn eigen_range(mut a: [[f64; MAX_BASIS]; MAX_BASIS], n: usize) -> (f64, f64)
             }
         }
     }
-    (0..n).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), i| (lo.min(a[i][i]), hi.max(a[i][i])))
+    (0..n).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), i| {
+        (lo.min(a[i][i]), hi.max(a[i][i]))
+    })
 }
 
 /// M = H⁻¹Fᵀ for a symmetric positive definite n × n H and a k × n F (rows of `f`), by

@@ -11,7 +11,9 @@ use specmux_twin::{Experiment, Rig};
 use std::path::{Path, PathBuf};
 
 fn repo(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(rel)
 }
 
 fn temp(tag: &str) -> PathBuf {
@@ -48,12 +50,25 @@ fn a_designed_layout_is_never_worse_than_the_papers_on_its_design_scenes() {
     let (paper, chosen) = (&d.candidates[0], &d.candidates[d.chosen]);
     assert!(paper.label.starts_with("paper"));
     for (c, p) in chosen.ideal.iter().zip(&paper.ideal) {
-        assert!(c.cube_psnr_db >= p.cube_psnr_db, "{}: {} < {}", c.scene, c.cube_psnr_db, p.cube_psnr_db);
+        assert!(
+            c.cube_psnr_db >= p.cube_psnr_db,
+            "{}: {} < {}",
+            c.scene,
+            c.cube_psnr_db,
+            p.cube_psnr_db
+        );
     }
     // Predicted and simulated crosstalk agree to a few dB on every channel of the paper's layout.
     for (k, o) in paper.ideal.iter().enumerate() {
-        for (p, s) in paper.predicted_db[k].iter().zip(o.leak_db.as_ref().unwrap()) {
-            assert!((p - s).abs() < 3.0, "{}: predicted {p} simulated {s}", o.scene);
+        for (p, s) in paper.predicted_db[k]
+            .iter()
+            .zip(o.leak_db.as_ref().unwrap())
+        {
+            assert!(
+                (p - s).abs() < 3.0,
+                "{}: predicted {p} simulated {s}",
+                o.scene
+            );
         }
     }
 }
@@ -115,7 +130,11 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
     let text = filters::run(&a, &lib).unwrap();
     assert!(text.contains("462 combinations"), "{text}");
     let wheel = std::fs::read_to_string(dir.join("out/wheel.toml")).unwrap();
-    let exp = Experiment::from_toml(&format!("[scene]\nsource = \"bars\"\nsize = [48, 48]\n{wheel}"), "w.toml").unwrap();
+    let exp = Experiment::from_toml(
+        &format!("[scene]\nsource = \"bars\"\nsize = [48, 48]\n{wheel}"),
+        "w.toml",
+    )
+    .unwrap();
     let rig = Rig::build(&exp, &lib, &Materials::load(&lib).unwrap()).unwrap();
     assert_eq!(rig.wheel.filters.len(), 6);
     std::fs::remove_dir_all(&dir).unwrap();
