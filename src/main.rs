@@ -121,6 +121,11 @@ enum Command {
         #[arg(long, default_value = "out/ptc")]
         out: PathBuf,
     },
+    /// Design tools: the wheel's filter set and the carrier layout, scored by simulation.
+    Design {
+        #[command(subcommand)]
+        what: specmux_design::DesignCommand,
+    },
     /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig.
     Reconstruct {
         frame: PathBuf,
@@ -134,31 +139,14 @@ enum Command {
     },
     /// Calibrate and acquire on the simulated rig (virtual clock), reconstruct every frame with
     /// the acquired calibration and print its error against the truth (docs/controller.md).
-    Rehearse(RunArgs),
+    Rehearse(controller::RunArgs),
     /// The same plan on the simulated (`--backend sim`) or real rig; OME-TIFF files.
     Acquire {
         #[command(flatten)]
-        run: RunArgs,
+        run: controller::RunArgs,
         #[arg(long, default_value = "sim")]
         backend: String,
     },
-}
-
-/// The plan of `rehearse` and `acquire`.
-#[derive(clap::Args)]
-struct RunArgs {
-    experiment: PathBuf,
-    #[arg(long, default_value_t = 100)]
-    frames: usize,
-    /// Print the plan, its checks and the expected timeline; send nothing.
-    #[arg(long)]
-    dry_run: bool,
-    /// Inject a fault in the simulated rig, KIND@EXPOSURE, e.g. dropped-frame@5.
-    #[arg(long)]
-    fault: Vec<String>,
-    /// Output folder (default out/rehearse or out/acquire).
-    #[arg(long)]
-    out: Option<PathBuf>,
 }
 
 /// Print a command's text to stdout; a closed pipe (`specmux demo | head`) ends quietly.
@@ -227,6 +215,7 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             size,
             out,
         } => commands::ptc(experiment.as_deref(), size, &out),
+        Command::Design { what } => what.run(lib),
         Command::Reconstruct {
             frame,
             experiment,
@@ -239,10 +228,4 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
         }
     };
     done.map_err(|e| e.to_string())
-}
-
-impl From<RunArgs> for controller::RunOptions {
-    fn from(a: RunArgs) -> Self {
-        Self::new(a.experiment, a.frames, a.dry_run, a.fault, a.out)
-    }
 }

@@ -384,3 +384,26 @@ fn real_backends_note() -> &'static str {
     "only `sim` runs a whole rig: the serial wheel (feature serial-wheel) and ALP-4 DMD (feature alp4) backends exist, \
      a GenICam camera backend does not yet (docs/controller.md, \"Running the rig for real\")"
 }
+
+/// The plan of `rehearse` and `acquire`.
+#[derive(clap::Args)]
+pub struct RunArgs {
+    pub experiment: PathBuf,
+    #[arg(long, default_value_t = 100)]
+    pub frames: usize,
+    /// Print the plan, its checks and the expected timeline; send nothing.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Inject a fault in the simulated rig, KIND@EXPOSURE, e.g. dropped-frame@5.
+    #[arg(long)]
+    pub fault: Vec<String>,
+    /// Output folder (default out/rehearse or out/acquire).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+impl From<RunArgs> for RunOptions {
+    fn from(a: RunArgs) -> Self {
+        Self::new(a.experiment, a.frames, a.dry_run, a.fault, a.out)
+    }
+}

@@ -83,7 +83,7 @@ impl Colorimetry {
 
 /// Register the embedded DejaVu Sans as plotters' "sans-serif" once (no system fonts); the
 /// error names the plot `path` that needed it.
-pub(crate) fn register_font(path: &Path) -> Result<()> {
+pub fn register_font(path: &Path) -> Result<()> {
     use std::sync::OnceLock;
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     let ok = *REGISTERED.get_or_init(|| {

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneConfig {
-    /// `dead-leaves`, `shaded-objects`, `exr:<path>` (a reflectance or radiance cube), or
+    /// `dead-leaves`, `shaded-objects`, `bars`, `exr:<path>` (a reflectance or radiance cube), or
     /// `mitsuba:<prefix>` (a Mitsuba render `<prefix>_truth.exr`, radiance; scene/mitsuba.rs).
     pub source: String,
     /// Width and height in pixels (procedural scenes; the prototype's 768 × 768).

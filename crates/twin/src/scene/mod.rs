@@ -1,6 +1,7 @@
-//! Scenes: procedural (dead leaves, shaded objects), EXR cubes and Mitsuba renders, and the
+//! Scenes: procedural (dead leaves, shaded objects, bars), EXR cubes and Mitsuba renders, and the
 //! reflectance library split into the basis's training half and the scenes' held-out half.
 
+pub mod bars;
 pub mod config;
 pub mod dead_leaves;
 pub mod mitsuba;
@@ -54,14 +55,14 @@ impl Materials {
 /// Check a `[scene]` section: the source names a built-in scene, an EXR cube or a Mitsuba
 /// render, and the size and grid are valid; the error names the key and the value.
 pub fn validate(cfg: &SceneConfig, f: &str) -> Result<()> {
-    let known = ["dead-leaves", "shaded-objects"];
+    let known = ["dead-leaves", "shaded-objects", "bars"];
     let prefixed = ["exr:", mitsuba::PREFIX].map(|p| cfg.source.starts_with(p));
     if !known.contains(&cfg.source.as_str()) && !prefixed.contains(&true) {
         return Err(Error::config(
             f,
             "scene.source",
             format!("\"{}\"", cfg.source),
-            "expected \"dead-leaves\", \"shaded-objects\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
+            "expected \"dead-leaves\", \"shaded-objects\", \"bars\", \"exr:<path>\" or \"mitsuba:<prefix>\"",
         ));
     }
     mitsuba::check(cfg, f)?;
@@ -85,8 +86,12 @@ pub fn build_at(cfg: &SceneConfig, file: &str, materials: &Materials, t_s: f64) 
         .collect();
     let src = cfg.source.as_str();
     let cube = match src {
-        "dead-leaves" => {
-            let labels = dead_leaves::labels(w, h, spectra.len(), cfg.seed);
+        "dead-leaves" | "bars" => {
+            let labels = if src == "bars" {
+                bars::labels(w, h, spectra.len(), cfg.seed)
+            } else {
+                dead_leaves::labels(w, h, spectra.len(), cfg.seed)
+            };
             paint(w, h, grid.count, |b, p| spectra[labels[p] as usize][b])
         }
         "shaded-objects" => {

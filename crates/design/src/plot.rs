@@ -1,0 +1,207 @@
+//! The design figures: filter curves, and the Fourier plane with its windows, harmonics and the
+//! measured scene spectrum. Legends sit in a column beside the plot so they never cover data.
+
+use crate::layout::Layout;
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use specmux_core::spectral::Curve;
+use specmux_core::{Error, Result};
+use specmux_io::png::write_png;
+use specmux_report::plot::register_font;
+use std::path::Path;
+
+/// Canvas of the curve plots, and of the Fourier plane (its data area square: 612 × 612 px).
+const SIZE: (u32, u32) = (1100, 620);
+const SQUARE: (u32, u32) = (1000, 716);
+/// Width of the legend column on the right.
+const LEGEND_W: u32 = 300;
+
+/// A drawing area of the in-memory bitmap.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+
+fn err(path: &Path) -> impl Fn(String) -> Error + '_ {
+    move |msg| Error::Image {
+        path: path.to_path_buf(),
+        msg,
+    }
+}
+
+/// Render into memory with `draw(plot area, legend area)`, then write the PNG atomically.
+fn render(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&Area, &Area) -> std::result::Result<(), String>,
+) -> Result<()> {
+    register_font(path)?;
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(path)(e.to_string()))?;
+        let (plot, legend) = root.split_horizontally(w - LEGEND_W);
+        draw(&plot, &legend).map_err(err(path))?;
+        root.present().map_err(|e| err(path)(e.to_string()))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err(path)("buffer".into()))?;
+    write_png(path, image::DynamicImage::ImageRgb8(img))
+}
+
+/// One legend entry per (label, style) in the legend column, from the top.
+fn legend(area: &Area, entries: &[(String, ShapeStyle)]) -> std::result::Result<(), String> {
+    let font = ("sans-serif", 15).into_font();
+    for (k, (label, style)) in entries.iter().enumerate() {
+        let y = 60 + 24 * k as i32;
+        area.draw(&PathElement::new(vec![(8, y), (38, y)], *style))
+            .map_err(|e| e.to_string())?;
+        area.draw(&Text::new(label.clone(), (46, y - 8), font.clone()))
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// Transmittance of each curve over `range_nm`, one colour per curve.
+pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64)) -> Result<()> {
+    render(path, SIZE, |plot, leg| {
+        let mut chart = ChartBuilder::on(plot)
+            .caption(title, ("sans-serif", 20))
+            .margin(14)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(range_nm.0..range_nm.1, 0.0..1.05)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("wavelength (nm)")
+            .y_desc("transmittance (fraction)")
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let mut entries = Vec::new();
+        for (k, c) in curves.iter().enumerate() {
+            let style = ShapeStyle::from(Palette99::pick(k).to_rgba()).stroke_width(2);
+            let pts = c
+                .wavelengths()
+                .iter()
+                .zip(c.values())
+                .filter(|(l, _)| (range_nm.0..=range_nm.1).contains(*l))
+                .map(|(&l, &v)| (l, v));
+            chart
+                .draw_series(LineSeries::new(pts, style))
+                .map_err(|e| e.to_string())?;
+            entries.push((c.name.clone(), style));
+        }
+        legend(leg, &entries)
+    })
+}
+
+/// The Fourier plane (cycles/pixel, DC in the centre): the scene power `spectrum` (N × N,
+/// row-major, unshifted, drawn as log10 relative to its peak), the crop windows of `layout`, its
+/// 2ω harmonics (×) and its sums/differences ω_i ± ω_j (○).
+pub fn fourier_plane(path: &Path, title: &str, layout: &Layout, spectrum: &[f64]) -> Result<()> {
+    let n = layout.size as i64;
+    let peak = spectrum.iter().cloned().fold(f64::MIN_POSITIVE, f64::max);
+    render(path, SQUARE, |plot, leg| {
+        let mut chart = ChartBuilder::on(plot)
+            .caption(title, ("sans-serif", 18))
+            .margin(14)
+            .x_label_area_size(44)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-0.5..0.5, -0.5..0.5)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("fx (cycles/pixel)")
+            .y_desc("fy (cycles/pixel)")
+            .draw()
+            .map_err(|e| e.to_string())?;
+        let f = |k: i64| k as f64 / n as f64;
+        let bins = (-n / 2..n - n / 2).flat_map(|ky| (-n / 2..n - n / 2).map(move |kx| (kx, ky)));
+        chart
+            .draw_series(bins.map(|(kx, ky)| {
+                let p = spectrum[(ky.rem_euclid(n) * n + kx.rem_euclid(n)) as usize];
+                // log10(p/peak) over 8 decades → grey 255 (faint) … 40 (strong).
+                let t = ((p / peak).max(1e-8).log10() / 8.0 + 1.0).clamp(0.0, 1.0);
+                let g = (255.0 - 215.0 * t) as u8;
+                let half = 0.5 / n as f64;
+                Rectangle::new(
+                    [(f(kx) - half, f(ky) - half), (f(kx) + half, f(ky) + half)],
+                    RGBColor(g, g, g).filled(),
+                )
+            }))
+            .map_err(|e| e.to_string())?;
+        let mut entries = vec![(
+            "scene power, log10 (8 decades)".to_string(),
+            ShapeStyle::from(RGBColor(90, 90, 90)).stroke_width(8),
+        )];
+        entries.extend(draw_windows(&mut chart, layout)?);
+        legend(leg, &entries)
+    })
+}
+
+type Chart<'a> = ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Windows (DC black; +ω_i in colour i, thick; −ω_i thin), harmonics and sum/difference terms.
+fn draw_windows(
+    chart: &mut Chart<'_>,
+    layout: &Layout,
+) -> std::result::Result<Vec<(String, ShapeStyle)>, String> {
+    let n = layout.size as f64;
+    let half = layout.window as f64 / 2.0 / n;
+    let wrap = |v: f64| (v + 0.5).rem_euclid(1.0) - 0.5;
+    // A window that crosses the edge of the plane is drawn with its periodic copies, clipped.
+    let rect = |cx: f64, cy: f64, style: ShapeStyle| {
+        let (cx, cy) = (wrap(cx), wrap(cy));
+        let clip = |v: f64| v.clamp(-0.5, 0.5);
+        [-1.0, 0.0, 1.0]
+            .into_iter()
+            .flat_map(|dx| [-1.0, 0.0, 1.0].map(|dy| (cx + dx, cy + dy)))
+            .filter(|&(x, y)| {
+                (x - half < 0.5 && x + half > -0.5) && (y - half < 0.5 && y + half > -0.5)
+            })
+            .map(move |(x, y)| {
+                let corners = [
+                    (clip(x - half), clip(y - half)),
+                    (clip(x + half), clip(y + half)),
+                ];
+                Rectangle::new(corners, style)
+            })
+            .collect::<Vec<_>>()
+    };
+    let e = |e: DrawingAreaErrorKind<_>| e.to_string();
+    let mut entries = vec![("DC window".to_string(), BLACK.stroke_width(2))];
+    chart
+        .draw_series(rect(0.0, 0.0, BLACK.stroke_width(2)))
+        .map_err(e)?;
+    for (i, &(bx, by)) in layout.bins.iter().enumerate() {
+        let c = Palette99::pick(i).to_rgba();
+        let (fx, fy) = (bx as f64 / n, by as f64 / n);
+        chart
+            .draw_series(rect(fx, fy, c.stroke_width(3)).into_iter().chain(rect(
+                -fx,
+                -fy,
+                c.stroke_width(1),
+            )))
+            .map_err(e)?;
+        let h = (wrap(2.0 * fx), wrap(2.0 * fy));
+        let marks = [h, (-h.0, -h.1)].map(|p| Cross::new(p, 6, c.stroke_width(2)));
+        chart.draw_series(marks).map_err(e)?;
+        entries.push((
+            format!("ω{i} = ({bx}, {by})/{} (+ thick, − thin)", layout.size),
+            c.stroke_width(3),
+        ));
+    }
+    let terms = layout.intermodulation();
+    chart
+        .draw_series(
+            terms
+                .iter()
+                .map(|&(x, y)| Circle::new((x as f64 / n, y as f64 / n), 4, BLACK.stroke_width(1))),
+        )
+        .map_err(e)?;
+    entries.push((
+        "× 2ω_i harmonic (colour of i)".into(),
+        BLACK.stroke_width(1),
+    ));
+    entries.push(("○ ω_i ± ω_j".into(), BLACK.stroke_width(1)));
+    Ok(entries)
+}

@@ -1,0 +1,141 @@
+//! End-to-end checks of both design commands on small frames: the designed layout is never worse
+//! than the paper's on the scenes it was designed on, and what each command writes is included
+//! by an experiment file unchanged.
+
+use specmux_core::spectral::Library;
+use specmux_design::carriers::{self, CarrierArgs};
+use specmux_design::filters::{self, FilterArgs};
+use specmux_design::layout::Guard;
+use specmux_twin::scene::Materials;
+use specmux_twin::{Experiment, Rig};
+use std::path::{Path, PathBuf};
+
+fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(rel)
+}
+
+fn temp(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("specmux-design-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn carrier_args(out: PathBuf) -> CarrierArgs {
+    CarrierArgs {
+        size: 64,
+        crop: vec![0.2],
+        window: vec!["square".into()],
+        carriers: None,
+        scenes: vec![repo("scenes/bars.toml"), repo("scenes/prototype.toml")],
+        scenes_dir: repo("scenes"),
+        cube: Vec::new(),
+        guard: Guard::Harmonics,
+        harmonic: 0.0,
+        restarts: 6,
+        candidates: 2,
+        coherent: false,
+        experiment: None,
+        seed: 1,
+        out,
+    }
+}
+
+#[test]
+fn a_designed_layout_is_never_worse_than_the_papers_on_its_design_scenes() {
+    let lib = Library::default_root();
+    let d = carriers::design(&carrier_args(temp("c0")), &lib).unwrap();
+    assert_eq!(d.simulation_scenes, ["bars", "dead-leaves"]);
+    let (paper, chosen) = (&d.candidates[0], &d.candidates[d.chosen]);
+    assert!(paper.label.starts_with("paper"));
+    for (c, p) in chosen.ideal.iter().zip(&paper.ideal) {
+        assert!(
+            c.cube_psnr_db >= p.cube_psnr_db,
+            "{}: {} < {}",
+            c.scene,
+            c.cube_psnr_db,
+            p.cube_psnr_db
+        );
+    }
+    // Predicted and simulated crosstalk agree to a few dB on every channel of the paper's layout.
+    for (k, o) in paper.ideal.iter().enumerate() {
+        for (p, s) in paper.predicted_db[k]
+            .iter()
+            .zip(o.leak_db.as_ref().unwrap())
+        {
+            assert!(
+                (p - s).abs() < 3.0,
+                "{}: predicted {p} simulated {s}",
+                o.scene
+            );
+        }
+    }
+}
+
+#[test]
+fn the_carrier_section_is_included_by_an_experiment_unchanged() {
+    let out = temp("c1");
+    carriers::run(&carrier_args(out.clone()), &Library::default_root()).unwrap();
+    let section = std::fs::read_to_string(out.join("carriers.toml")).unwrap();
+    let text = format!("[scene]\nsource = \"bars\"\nsize = [64, 64]\n\n{section}");
+    let e = Experiment::from_toml(&text, "included.toml").unwrap();
+    assert_eq!(e.rig.carriers.frequencies.as_ref().map(Vec::len), Some(6));
+    Experiment::load(&out.join("experiment.toml")).unwrap();
+    for f in ["fourier_paper.png", "report.json"] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    std::fs::remove_dir_all(&out).unwrap();
+}
+
+/// A copy of spectra/ without generated curves, so the test writes its own.
+fn library_copy(dir: &Path) -> Library {
+    fn copy(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).unwrap();
+        for e in std::fs::read_dir(from).unwrap() {
+            let p = e.unwrap().path();
+            let name = p.file_name().unwrap();
+            if p.is_dir() && name != "design" {
+                copy(&p, &to.join(name));
+            } else if p.is_file() {
+                std::fs::copy(&p, to.join(name)).unwrap();
+            }
+        }
+    }
+    copy(&repo("spectra"), dir);
+    Library::new(dir)
+}
+
+#[test]
+fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
+    let dir = temp("f0");
+    let lib = library_copy(&dir.join("spectra"));
+    let fam = dir.join("families.toml");
+    std::fs::write(&fam, "gaussian_centres_nm = [450, 650, 100]\ngaussian_fwhm_nm = [80]\nlongpass_edges_nm = [600, 600, 40]\nshortpass_edges_nm = [500, 500, 40]\ndichroic_bands_nm = []\n").unwrap();
+    let a = FilterArgs {
+        catalog: None,
+        choose: 6,
+        families: Some(fam),
+        no_families: false,
+        keep: Vec::new(),
+        electrons: 1e4,
+        top: 3,
+        simulate: 1,
+        scenes: vec![repo("scenes/bars.toml")],
+        scenes_dir: repo("scenes"),
+        size: 48,
+        experiment: None,
+        out: dir.join("out"),
+    };
+    let text = filters::run(&a, &lib).unwrap();
+    assert!(text.contains("462 combinations"), "{text}");
+    let wheel = std::fs::read_to_string(dir.join("out/wheel.toml")).unwrap();
+    let exp = Experiment::from_toml(
+        &format!("[scene]\nsource = \"bars\"\nsize = [48, 48]\n{wheel}"),
+        "w.toml",
+    )
+    .unwrap();
+    let rig = Rig::build(&exp, &lib, &Materials::load(&lib).unwrap()).unwrap();
+    assert_eq!(rig.wheel.filters.len(), 6);
+    std::fs::remove_dir_all(&dir).unwrap();
+}
