@@ -36,7 +36,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["metrics"],
         ],
     ),
-    ("io", &[&["atomic"], &["exr", "png", "json"]]),
+    ("io", &[&["atomic"], &["exr", "png", "json", "output_set"]]),
     (
         "twin",
         // The light path, then the calibration captures made with it; experiment composes the
@@ -53,6 +53,43 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["rig"],
             &["forward"],
             &["run"],
+        ],
+    ),
+    (
+        "controller",
+        // The devices and the plan, then the simulated and real devices that follow them, the
+        // run that drives them, its recording, and the commands.
+        &[
+            &["error"],
+            &["log"],
+            &["signal"],
+            &["devices"],
+            &["plan"],
+            &["patterns"],
+            &["ome"],
+            &["real"],
+            &["sim"],
+            &["run"],
+            &["record"],
+            &["commands"],
+        ],
+    ),
+    (
+        "design",
+        // Catalogues and layouts, the criteria and searches over them, then the two commands.
+        &[
+            &["catalog"],
+            &["layout"],
+            &["progress"],
+            &["small"],
+            &["criteria"],
+            &["search"],
+            &["leak"],
+            &["scenes"],
+            &["plot"],
+            &["filters"],
+            &["optimise"],
+            &["carriers"],
         ],
     ),
     (

@@ -27,7 +27,7 @@ use specmux_core::unmix::{second_difference, MAX_BASIS};
 use specmux_core::{Error, Result};
 
 /// Largest set scored (the unmixer's channel limit).
-pub const MAX_K: usize = specmux_core::unmix::MAX_CHANNELS;
+pub use crate::small::MAX_K;
 
 /// The light level and sampling of the noise model.
 #[derive(Clone, Copy, Debug, Serialize)]

@@ -1,7 +1,8 @@
 //! Allocation-free kernels for the small dense matrices of the filter criteria (J ≤ 8 basis
 //! vectors, k ≤ 16 channels), so that millions of sets can be scored; checked against nalgebra.
 
-use crate::criteria::MAX_K;
+/// The most channels a filter set of the search has (the core unmixer's limit).
+pub const MAX_K: usize = specmux_core::unmix::MAX_CHANNELS;
 use specmux_core::unmix::MAX_BASIS;
 
 /// Smallest and largest eigenvalue of the leading n × n block of a symmetric matrix (cyclic

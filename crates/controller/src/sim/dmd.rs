@@ -4,7 +4,6 @@
 //! in step mode each edge shows the next picture. Each sequence start emits a synch-out edge.
 //! The twin images only the pictures it knows: each design pattern, all dark, all bright.
 
-use super::light::Picture;
 use super::{ns, Bench, Ev, FaultKind};
 use crate::devices::{
     BitPlane, Dmd, DmdInfo, DmdStatus, ProjectionMode, SeqTiming, SequenceId, TriggerSource,
@@ -17,6 +16,17 @@ use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::rc::Rc;
 
 const DEVICE: &str = "dmd";
+
+/// What a binary picture images to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Picture {
+    /// Design pattern k: the twin's s̃_k.
+    Pattern(usize),
+    /// Every mirror off.
+    Dark,
+    /// Every mirror on: a uniform 1.
+    Bright,
+}
 
 /// One picture on the mirrors from `start` to `end` (virtual ns).
 #[derive(Clone, Copy, Debug)]

@@ -17,18 +17,7 @@ use specmux_twin::sensor::Sensor;
 use specmux_twin::{Experiment, Rig};
 use std::collections::{HashMap, VecDeque};
 
-use super::dmd::Shown;
-
-/// What a binary picture images to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Picture {
-    /// Design pattern k: the twin's s̃_k.
-    Pattern(usize),
-    /// Every mirror off.
-    Dark,
-    /// Every mirror on: a uniform 1.
-    Bright,
-}
+use super::dmd::{Picture, Shown};
 
 /// E_ip in seconds for every picture p lit during [a, b): light through segment i (point spot)
 /// while p was on the mirrors. Dark pictures are left out.
