@@ -477,11 +477,22 @@ pub fn reconstruct(
 /// A camera frame: one channel of an EXR file.
 fn read_frame(path: &Path) -> Result<specmux_core::Cube> {
     let (frame, _) = exr_io::read(path)?;
+    let bad = |msg: String| Error::Exr {
+        path: path.to_path_buf(),
+        msg,
+    };
     if frame.planes != 1 {
-        return Err(Error::Exr {
-            path: path.to_path_buf(),
-            msg: format!("a frame has one channel, this file has {}", frame.planes),
-        });
+        return Err(bad(format!(
+            "a frame has one channel, this file has {}",
+            frame.planes
+        )));
+    }
+    if let Some(p) = frame.data.iter().position(|v| !v.is_finite()) {
+        let (x, y) = (p % frame.width, p / frame.width);
+        return Err(bad(format!(
+            "pixel ({x}, {y}) is {}: a frame must be finite",
+            frame.data[p]
+        )));
     }
     Ok(frame)
 }
