@@ -1,36 +1,11 @@
 //! Bad input gets a one-line error that names the file and the field, and a non-zero exit:
 //! never a panic, never NaN.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-fn tmpdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("specmux-bad-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// A copy of the real spectra/ folder that a test may corrupt.
-fn spectra_copy(dir: &Path) -> PathBuf {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");
-    let dst = dir.join("spectra");
-    copy_dir(&src, &dst);
-    dst
-}
-
-fn copy_dir(src: &Path, dst: &Path) {
-    std::fs::create_dir_all(dst).unwrap();
-    for e in std::fs::read_dir(src).unwrap() {
-        let p = e.unwrap().path();
-        let to = dst.join(p.file_name().unwrap());
-        if p.is_dir() {
-            copy_dir(&p, &to)
-        } else {
-            std::fs::copy(&p, &to).unwrap();
-        }
-    }
-}
+mod common;
+use common::{spectra_copy, tmpdir};
 
 /// Run `specmux simulate` on an experiment text; return (success, stderr).
 fn simulate(dir: &Path, toml: &str, spectra: Option<&Path>) -> (bool, String) {
@@ -70,7 +45,7 @@ const SMALL: &str = "[scene]\nsize = [64, 64]\n";
 
 #[test]
 fn missing_spectrum_file() {
-    let d = tmpdir("missing");
+    let d = tmpdir("bad-missing");
     let toml = format!("{SMALL}[rig.wheel]\nfilters = [\"wheel/red\", \"wheel/nope\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n");
     let (ok, err) = simulate(&d, &toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.wheel.filters[1]", "nope.csv"]);
@@ -78,7 +53,7 @@ fn missing_spectrum_file() {
 
 #[test]
 fn malformed_csv() {
-    let d = tmpdir("malformed");
+    let d = tmpdir("bad-malformed");
     let s = spectra_copy(&d);
     let f = s.join("wheel/green.csv");
     let text = std::fs::read_to_string(&f)
@@ -95,7 +70,7 @@ fn malformed_csv() {
 
 #[test]
 fn nan_in_a_curve() {
-    let d = tmpdir("nan");
+    let d = tmpdir("bad-nan");
     let s = spectra_copy(&d);
     let f = s.join("camera/mono_qe.csv");
     let mut lines: Vec<String> = std::fs::read_to_string(&f)
@@ -115,7 +90,7 @@ fn nan_in_a_curve() {
 fn a_segment_that_passes_no_light_cannot_form_a_pattern() {
     // An infrared filter (750–800 nm) on a 400–700 nm rig: its pattern through the 4f filter
     // would be dark, so the experiment is refused by the filter's key.
-    let d = tmpdir("dark-segment");
+    let d = tmpdir("bad-dark-segment");
     let s = spectra_copy(&d);
     std::fs::write(
         s.join("wheel/ir.csv"),
@@ -135,14 +110,14 @@ fn a_segment_that_passes_no_light_cannot_form_a_pattern() {
 
 #[test]
 fn negative_wavelength_step() {
-    let d = tmpdir("step");
+    let d = tmpdir("bad-step");
     let (ok, err) = simulate(&d, "[scene]\nwavelengths_nm = [400, 700, -10]\n", None);
     assert_one_line_error(ok, &err, &["exp.toml", "scene.wavelengths_nm[2]", "-10"]);
 }
 
 #[test]
 fn exr_with_the_wrong_channel_count() {
-    let d = tmpdir("exr");
+    let d = tmpdir("bad-exr");
     let cube = specmux_core::Cube::zeros(64, 64, 5);
     let names: Vec<String> = (0..5)
         .map(|k| specmux_io::exr::band_name(400.0 + 10.0 * k as f64))
@@ -155,14 +130,14 @@ fn exr_with_the_wrong_channel_count() {
 
 #[test]
 fn unknown_key() {
-    let d = tmpdir("key");
+    let d = tmpdir("bad-key");
     let (ok, err) = simulate(&d, "[rig.wheel]\nfilterz = []\n", None);
     assert_one_line_error(ok, &err, &["exp.toml:2", "filterz"]);
 }
 
 #[test]
 fn out_of_range_values_in_the_light_path_sections() {
-    let d = tmpdir("ranges");
+    let d = tmpdir("bad-ranges");
     for (toml, key, value) in [
         ("[rig.sensor]\nbits = 40\n", "rig.sensor.bits", "40"),
         (
@@ -199,7 +174,7 @@ fn out_of_range_values_in_the_light_path_sections() {
 
 #[test]
 fn a_timing_that_needs_a_faster_dmd_is_refused() {
-    let d = tmpdir("dmdrate");
+    let d = tmpdir("bad-dmdrate");
     let toml = "[rig.timing.wheel]\nrate_hz = 10000\n";
     let (ok, err) = simulate(&d, toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.timing"]);
@@ -207,7 +182,7 @@ fn a_timing_that_needs_a_faster_dmd_is_refused() {
 
 #[test]
 fn sensor_and_timing_must_agree_on_the_exposure() {
-    let d = tmpdir("exposure");
+    let d = tmpdir("bad-exposure");
     let toml = "[rig.timing.camera]\nexposure_s = 0.02\n[rig.sensor]\n";
     let (ok, err) = simulate(&d, toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.sensor.exposure_s", "0.02"]);

@@ -12,8 +12,10 @@ use specmux_core::unmix::Unmixer;
 use specmux_core::{Cube, Error};
 use specmux_twin::experiment::Experiment;
 use specmux_twin::run::{self, RunReport};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
+
+mod common;
 
 /// Print the outcome of a case for docs/stability.md.
 fn record(case: &str, outcome: &str) {
@@ -82,35 +84,18 @@ fn finite(case: &str, rep: &RunReport) {
 }
 
 fn temp(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("specmux-stab-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::tmpdir(&format!("stab-{tag}"))
 }
 
 /// A copy of spectra/ whose `name` curve is replaced by `csv`.
 fn library_with(tag: &str, name: &str, csv: &str) -> Library {
-    let dst = temp(tag).join("spectra");
-    copy_dir(&Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra"), &dst);
+    let dst = common::spectra_copy(&temp(tag));
     std::fs::write(
         dst.join(format!("{name}.csv")),
         format!("# provenance: stability test\n{csv}"),
     )
     .unwrap();
     Library::new(dst)
-}
-
-fn copy_dir(src: &Path, dst: &Path) {
-    std::fs::create_dir_all(dst).unwrap();
-    for e in std::fs::read_dir(src).unwrap() {
-        let p = e.unwrap().path();
-        let to = dst.join(p.file_name().unwrap());
-        if p.is_dir() {
-            copy_dir(&p, &to)
-        } else {
-            std::fs::copy(&p, &to).unwrap();
-        }
-    }
 }
 
 // ---------------------------------------------------------------- unmixing
