@@ -1,0 +1,152 @@
+//! Medians of the real-time path on the CPU and on the GPU, 768 × 768, the prototype on
+//! dead-leaves and on shaded objects: the GPU FFT alone, demultiplexing, unmixing, and the
+//! whole frame with and without reading the 31-band cube back (docs/gpu.md). Each figure is
+//! the median wall time of REPEATS runs after WARMUP, the GPU ones from submission to the
+//! finished work (and the host copy where one is named).
+//!
+//! `cargo bench -p specmux-gpu --bench realtime` (SPECMUX_BENCH_REPEATS overrides REPEATS).
+
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+use specmux_gpu::fft::{Direction, GpuFft2};
+use specmux_gpu::{GpuContext, GpuReconstructor};
+use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::Pipeline;
+use specmux_twin::rig::Rig;
+use specmux_twin::run;
+use specmux_twin::scene::Materials;
+use std::time::Instant;
+
+const WARMUP: usize = 5;
+const REPEATS: usize = 50;
+
+/// Median seconds of `f` over the repeats.
+fn median(repeats: usize, mut f: impl FnMut()) -> f64 {
+    for _ in 0..WARMUP {
+        f();
+    }
+    let mut t: Vec<f64> = (0..repeats)
+        .map(|_| {
+            let s = Instant::now();
+            f();
+            s.elapsed().as_secs_f64()
+        })
+        .collect();
+    t.sort_by(f64::total_cmp);
+    t[t.len() / 2]
+}
+
+fn row(scene: &str, what: &str, device: &str, s: f64) {
+    println!("| {scene} | {what} | {device} | {:.3} |", s * 1e3);
+}
+
+/// The GPU 2-D FFT of one 768² complex plane, forward, alone.
+fn fft_alone(ctx: &GpuContext, repeats: usize) -> f64 {
+    let (w, h) = (768, 768);
+    let buf = ctx.storage("fft bench", (w * h * 8) as u64);
+    let fft = GpuFft2::new(ctx, &buf, w, h, 1).expect("768 = 4⁴·3");
+    median(repeats, || {
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        fft.encode(&mut enc, &buf, Direction::Forward);
+        ctx.queue.submit([enc.finish()]);
+        ctx.wait().unwrap();
+    })
+}
+
+fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
+    let lib = Library::default_root();
+    let materials = Materials::load(&lib).expect("spectra/ is readable");
+    let exp = Experiment::from_toml(toml, name).expect("a valid experiment");
+    let rig = Rig::build(&exp, &lib, &materials).expect("rig");
+    let (sim, _) = Pipeline::build(&exp, &rig, &materials)
+        .unwrap()
+        .run()
+        .unwrap();
+    let frame = sim.frame.clone();
+    let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+    let xhat = recon.demultiplex(&frame).unwrap();
+    let mut cube = recon.unmix(&xhat).unwrap().0;
+    let stats = recon.unmixer.unmix_into(&xhat, &mut cube).unwrap();
+    eprintln!(
+        "{name}: {} of {} pixels constrained",
+        stats.constrained_pixels, stats.pixels
+    );
+    row(
+        name,
+        "demultiplex",
+        "CPU",
+        median(repeats, || drop(recon.demultiplex(&frame).unwrap())),
+    );
+    row(
+        name,
+        "unmix",
+        "CPU",
+        median(repeats, || {
+            drop(recon.unmixer.unmix_into(&xhat, &mut cube).unwrap())
+        }),
+    );
+    row(
+        name,
+        "demultiplex + unmix, cube reused",
+        "CPU",
+        median(repeats, || {
+            let x = recon.demultiplex(&frame).unwrap();
+            recon.unmixer.unmix_into(&x, &mut cube).unwrap();
+        }),
+    );
+    let g = GpuReconstructor::new(ctx, &recon).unwrap();
+    let mut gcube: Cube = g.output_cube();
+    row(
+        name,
+        "demultiplex, x̂ read back",
+        "GPU",
+        median(repeats, || drop(g.demultiplex(ctx, &frame).unwrap())),
+    );
+    row(
+        name,
+        "demultiplex + unmix, cube stays on GPU",
+        "GPU",
+        median(repeats, || drop(g.run_resident(ctx, &frame).unwrap())),
+    );
+    row(
+        name,
+        "demultiplex + unmix, cube read back",
+        "GPU",
+        median(repeats, || {
+            drop(g.run_into(ctx, &frame, &mut gcube).unwrap())
+        }),
+    );
+}
+
+fn main() {
+    let ctx = match GpuContext::new() {
+        Ok(c) => c,
+        Err(e) => {
+            println!("no GPU: {e}; nothing to time");
+            return;
+        }
+    };
+    let repeats = std::env::var("SPECMUX_BENCH_REPEATS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(REPEATS);
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!(
+        "adapter: {}; CPU threads: {threads}; median of {repeats} runs, ms\n",
+        ctx.adapter_name()
+    );
+    println!("| scene | stage | device | median ms |\n| --- | --- | --- | --- |");
+    row(
+        "—",
+        "FFT 768² complex, forward",
+        "GPU",
+        fft_alone(&ctx, repeats),
+    );
+    bench_scene(&ctx, "dead-leaves", "", repeats);
+    bench_scene(
+        &ctx,
+        "shaded-objects",
+        "[scene]\nsource = \"shaded-objects\"\nseed = 11\n",
+        repeats,
+    );
+}

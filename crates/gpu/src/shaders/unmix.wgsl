@@ -1,0 +1,268 @@
+// Per-pixel non-negative unmixing, one invocation per pixel (crates/core/src/unmix.rs and
+// unmix/dual.rs do the same on the CPU): r = P x̂ (P = diag(gain)·B·H⁻¹Fᵀ); a pixel whose r has
+// a negative band is solved exactly by Goldfarb–Idnani's dual active-set method from the
+// unconstrained minimiser, min ½αᵀHα − gᵀα s.t. Bα ≥ 0, with J ≤ 8 variables and ≤ 64 bands,
+// in f32, step for step as the CPU's f64 code; the cube is max(Bα, 0)·gain.
+
+struct Params {
+    npx: u32,
+    // J, bands, channels.
+    n: u32,
+    m: u32,
+    c: u32,
+    // Offsets into `tables` of M (n × c), B (m × n row-major), 1/‖b_k‖ (m), gains (m),
+    // L⁻ᵀ (8 × 8 column-major); P (m × c) is at 0.
+    off_unc: u32,
+    off_basis: u32,
+    off_binv: u32,
+    off_gain: u32,
+    off_linv: u32,
+    // A band counts as violated below −tol·scale; the new band counts as dependent on the
+    // active ones when ‖d₂‖² ≤ dependent·‖d‖² (f32 values of the CPU's 1e-12 and 1e-13).
+    tol: f32,
+    dependent: f32,
+    _pad: u32,
+}
+
+@group(0) @binding(0) var<storage, read> xhat: array<f32>;
+@group(0) @binding(1) var<storage, read_write> cube: array<f32>;
+@group(0) @binding(2) var<storage, read> tables: array<f32>;
+// [constrained pixels, bound pixels, total iterations, max iterations, no convergence,
+//  infeasible]
+@group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 8>;
+@group(0) @binding(4) var<uniform> prm: Params;
+
+const MAXB: u32 = 8u;
+const MAXM: u32 = 64u;
+const MAXC: u32 = 16u;
+const MAX_ITERATIONS: u32 = 500u;
+// Stands for +∞ (WGSL has no infinity literal); every finite step is far below it.
+const BIG: f32 = 3.0e38;
+
+var<private> s: array<f32, MAXM>;
+var<private> jm: array<f32, 64>; // J = L⁻ᵀQ, column-major: jm[col * 8 + row]
+var<private> rm: array<f32, 64>; // R, upper triangular: rm[i * 8 + k]
+var<private> act: array<u32, MAXB>;
+var<private> mu: array<f32, MAXB>;
+var<private> alpha: array<f32, MAXB>;
+var<private> in_w: array<bool, MAXM>;
+var<private> q: u32;
+
+fn basis(k: u32, j: u32) -> f32 {
+    return tables[prm.off_basis + k * prm.n + j];
+}
+
+// s = Bα on the bands.
+fn spectrum() {
+    for (var k = 0u; k < prm.m; k++) {
+        var acc = 0.0;
+        for (var j = 0u; j < prm.n; j++) {
+            acc += basis(k, j) * alpha[j];
+        }
+        s[k] = acc;
+    }
+}
+
+// Columns a and b of J: a ← c·a + sn·b, b ← c·b − sn·a.
+fn rotate_columns(a: u32, b: u32, c: f32, sn: f32) {
+    for (var i = 0u; i < MAXB; i++) {
+        let x = jm[a * 8u + i];
+        let y = jm[b * 8u + i];
+        jm[a * 8u + i] = c * x + sn * y;
+        jm[b * 8u + i] = c * y - sn * x;
+    }
+}
+
+// Add band `band` with multiplier `mu_p`, given d = Jᵀb: rotate d's tail into d[q].
+fn add_band(d: ptr<function, array<f32, MAXB>>, band: u32, mu_p: f32) {
+    for (var i = prm.n - 1u; i > q; i--) {
+        let x = (*d)[i - 1u];
+        let y = (*d)[i];
+        let h = sqrt(x * x + y * y);
+        if h > 0.0 {
+            (*d)[i - 1u] = h;
+            (*d)[i] = 0.0;
+            rotate_columns(i - 1u, i, x / h, y / h);
+        }
+    }
+    for (var i = 0u; i <= q; i++) {
+        rm[i * 8u + q] = (*d)[i];
+    }
+    act[q] = band;
+    mu[q] = mu_p;
+    q += 1u;
+}
+
+// Drop the active band at position l: remove R's column, restore the triangle by Givens
+// rotations of R's rows and the matching columns of J.
+fn drop_band(l: u32) {
+    for (var k = l; k + 1u < q; k++) {
+        for (var i = 0u; i <= k + 1u; i++) {
+            rm[i * 8u + k] = rm[i * 8u + k + 1u];
+        }
+        act[k] = act[k + 1u];
+        mu[k] = mu[k + 1u];
+    }
+    for (var i = l; i + 1u < q; i++) {
+        let x = rm[i * 8u + i];
+        let y = rm[(i + 1u) * 8u + i];
+        let h = sqrt(x * x + y * y);
+        if h > 0.0 {
+            let c = x / h;
+            let sn = y / h;
+            for (var k = i; k + 1u < q; k++) {
+                let a = rm[i * 8u + k];
+                let b = rm[(i + 1u) * 8u + k];
+                rm[i * 8u + k] = c * a + sn * b;
+                rm[(i + 1u) * 8u + k] = c * b - sn * a;
+            }
+            rotate_columns(i, i + 1u, c, sn);
+        }
+    }
+    q -= 1u;
+}
+
+// The most violated band (values normalised by ‖b_k‖) outside the working set, or MAXM.
+fn most_violated(tol: f32) -> u32 {
+    var p = MAXM;
+    var worst = -tol;
+    for (var k = 0u; k < prm.m; k++) {
+        let v = s[k] * tables[prm.off_binv + k];
+        if !in_w[k] && v < worst {
+            worst = v;
+            p = k;
+        }
+    }
+    return p;
+}
+
+// Goldfarb–Idnani from α = the unconstrained minimiser (s = Bα). Returns the iterations, or
+// 0xffffffff when it did not converge, 0xfffffffe when no step is finite (infeasible).
+fn active_set(scale: f32) -> u32 {
+    let n = prm.n;
+    for (var i = 0u; i < 64u; i++) {
+        jm[i] = tables[prm.off_linv + i];
+        rm[i] = 0.0;
+    }
+    q = 0u;
+    var iterations = 0u;
+    loop {
+        let p = most_violated(prm.tol * scale);
+        if p == MAXM { break; }
+        var bp: array<f32, MAXB>;
+        for (var j = 0u; j < MAXB; j++) { bp[j] = select(0.0, basis(p, j), j < n); }
+        var mu_p = 0.0;
+        loop {
+            iterations += 1u;
+            if iterations > MAX_ITERATIONS { return 0xffffffffu; }
+            // Declared in the loop, but set here: naga hoists a loop's `var` to the function
+            // and does not zero it again on each pass.
+            var d: array<f32, MAXB>;
+            var z: array<f32, MAXB>;
+            var rr: array<f32, MAXB>;
+            var dd = 0.0;
+            var d2 = 0.0;
+            for (var i = 0u; i < MAXB; i++) {
+                z[i] = 0.0;
+                rr[i] = 0.0;
+                var acc = 0.0;
+                for (var r = 0u; r < n; r++) { acc += jm[i * 8u + r] * bp[r]; }
+                d[i] = acc;
+                dd += acc * acc;
+                if i >= q && i < n { d2 += acc * acc; }
+            }
+            // Primal direction z = J₂d₂, dual direction rr = R⁻¹d₁.
+            for (var i = q; i < n; i++) {
+                for (var l = 0u; l < MAXB; l++) { z[l] += jm[i * 8u + l] * d[i]; }
+            }
+            for (var ii = 0u; ii < q; ii++) {
+                let i = q - 1u - ii;
+                var acc = 0.0;
+                for (var k = i + 1u; k < q; k++) { acc += rm[i * 8u + k] * rr[k]; }
+                rr[i] = (d[i] - acc) / rm[i * 8u + i];
+            }
+            // Partial step: the first active multiplier to reach zero.
+            var t1 = BIG;
+            var dropped = MAXB;
+            for (var k = 0u; k < q; k++) {
+                if rr[k] > 0.0 {
+                    let t = mu[k] / rr[k];
+                    if t < t1 { t1 = t; dropped = k; }
+                }
+            }
+            // Full step: band p becomes exactly satisfied.
+            var zb = 0.0;
+            var sp = 0.0;
+            for (var l = 0u; l < n; l++) { zb += z[l] * bp[l]; sp += bp[l] * alpha[l]; }
+            var t2 = BIG;
+            if d2 > prm.dependent * dd && zb > 0.0 { t2 = -sp / zb; }
+            var t = t2;
+            if t1 < t2 { t = t1; } else { dropped = MAXB; }
+            if !(t < BIG) { return 0xfffffffeu; }
+            for (var k = 0u; k < q; k++) { mu[k] -= t * rr[k]; }
+            mu_p += t;
+            if t2 < BIG {
+                for (var l = 0u; l < n; l++) { alpha[l] += t * z[l]; }
+            }
+            if dropped < MAXB {
+                in_w[act[dropped]] = false;
+                drop_band(dropped);
+            } else {
+                add_band(&d, p, mu_p);
+                in_w[p] = true;
+                if q == n {
+                    // n independent homogeneous constraints meet only at α = 0.
+                    for (var l = 0u; l < MAXB; l++) { alpha[l] = 0.0; }
+                }
+                break;
+            }
+        }
+        spectrum();
+    }
+    return iterations;
+}
+
+// The exact solution of a pixel with channel values x (its fast-path r was negative
+// somewhere): s ← max(Bα, 0)·gain, statistics counted.
+fn solve(x: ptr<function, array<f32, MAXC>>) {
+    for (var j = 0u; j < MAXB; j++) {
+        var acc = 0.0;
+        if j < prm.n {
+            for (var i = 0u; i < prm.c; i++) { acc += tables[prm.off_unc + j * prm.c + i] * (*x)[i]; }
+        }
+        alpha[j] = acc;
+    }
+    spectrum();
+    var scale = 0.0;
+    for (var k = 0u; k < prm.m; k++) { scale = max(scale, abs(s[k])); }
+    let it = active_set(scale);
+    atomicAdd(&stats[0], 1u);
+    if it == 0xffffffffu { atomicAdd(&stats[4], 1u); return; }
+    if it == 0xfffffffeu { atomicAdd(&stats[5], 1u); return; }
+    if q > 0u { atomicAdd(&stats[1], 1u); }
+    atomicAdd(&stats[2], it);
+    atomicMax(&stats[3], it);
+    for (var k = 0u; k < prm.m; k++) {
+        s[k] = max(s[k], 0.0) * tables[prm.off_gain + k];
+    }
+}
+
+@compute @workgroup_size(64)
+fn unmix(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let px = gid.x + gid.y * 65535u * 64u;
+    if px >= prm.npx { return; }
+    var x: array<f32, MAXC>;
+    for (var i = 0u; i < prm.c; i++) { x[i] = xhat[i * prm.npx + px]; }
+    // The fast path: r = P x̂, in the CPU's order of summation.
+    var minr = BIG;
+    for (var k = 0u; k < prm.m; k++) {
+        var acc = tables[k * prm.c] * x[0];
+        for (var i = 1u; i < prm.c; i++) { acc += tables[k * prm.c + i] * x[i]; }
+        s[k] = acc;
+        minr = min(minr, acc);
+    }
+    if minr < 0.0 {
+        solve(&x);
+    }
+    for (var k = 0u; k < prm.m; k++) { cube[k * prm.npx + px] = s[k]; }
+}
