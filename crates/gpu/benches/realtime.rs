@@ -9,7 +9,7 @@
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_gpu::fft::{Direction, GpuFft2};
-use specmux_gpu::{GpuContext, GpuReconstructor};
+use specmux_gpu::{wgpu, GpuContext, GpuReconstructor};
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::rig::Rig;
@@ -51,6 +51,45 @@ fn fft_alone(ctx: &GpuContext, repeats: usize) -> f64 {
         ctx.queue.submit([enc.finish()]);
         ctx.wait().unwrap();
     })
+}
+
+/// The GPU path's parts: the frame's upload, demultiplexing with x̂ left on the GPU, and the
+/// unmixing of that x̂ (its counters read back, the cube left on the GPU).
+fn gpu_stages(ctx: &GpuContext, g: &GpuReconstructor, frame: &Cube, name: &str, repeats: usize) {
+    let submit = |f: &dyn Fn(&mut wgpu::CommandEncoder)| {
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        f(&mut enc);
+        ctx.queue.submit([enc.finish()]);
+    };
+    row(
+        name,
+        "upload frame",
+        "GPU",
+        median(repeats, || {
+            g.demux.upload(ctx, frame).unwrap();
+            submit(&|_| ());
+            ctx.wait().unwrap();
+        }),
+    );
+    row(
+        name,
+        "demultiplex, x̂ stays on GPU",
+        "GPU",
+        median(repeats, || {
+            g.demux.upload(ctx, frame).unwrap();
+            submit(&|enc| g.demux.encode(enc));
+            ctx.wait().unwrap();
+        }),
+    );
+    row(
+        name,
+        "unmix, x̂ and cube on GPU",
+        "GPU",
+        median(repeats, || {
+            submit(&|enc| g.unmix.encode(enc));
+            g.unmix.stats(ctx).unwrap();
+        }),
+    );
 }
 
 fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
@@ -96,6 +135,7 @@ fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
     );
     let g = GpuReconstructor::new(ctx, &recon).unwrap();
     let mut gcube: Cube = g.output_cube();
+    gpu_stages(ctx, &g, &frame, name, repeats);
     row(
         name,
         "demultiplex, x̂ read back",

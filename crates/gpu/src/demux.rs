@@ -10,6 +10,9 @@ use crate::fft::{Direction, GpuFft2};
 use specmux_core::demux::Demux;
 use specmux_core::Cube;
 
+/// Stages recorded by `GpuDemux::encode` (see `encode_stage`).
+pub const STAGES: usize = 5;
+
 /// Largest number of carriers (the `MAX_PLANES` of shaders/demux.wgsl).
 pub const MAX_CARRIERS: usize = 16;
 
@@ -172,14 +175,33 @@ impl GpuDemux {
 
     /// Record the whole demultiplexing of the uploaded frame into `enc`.
     pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
-        self.to_complex
-            .record(&mut enc.begin_compute_pass(&Default::default()));
-        self.forward.encode(enc, &self.spectrum, Direction::Forward);
-        self.crop
-            .record(&mut enc.begin_compute_pass(&Default::default()));
-        self.inverse.encode(enc, &self.z, Direction::Inverse);
-        self.demod
-            .record(&mut enc.begin_compute_pass(&Default::default()));
+        for stage in 0..STAGES {
+            self.encode_stage(enc, stage);
+        }
+    }
+
+    /// Record one stage: 0 the frame to a complex plane, 1 its forward FFT (in the spectrum
+    /// buffer), 2 the windows' crop (in the windows buffer), 3 their inverse FFT, 4 the
+    /// demodulation and mix (in `output`). Tests check each against its CPU reference.
+    pub fn encode_stage(&self, enc: &mut wgpu::CommandEncoder, stage: usize) {
+        match stage {
+            0 => self
+                .to_complex
+                .record(&mut enc.begin_compute_pass(&Default::default())),
+            1 => self.forward.encode(enc, &self.spectrum, Direction::Forward),
+            2 => self
+                .crop
+                .record(&mut enc.begin_compute_pass(&Default::default())),
+            3 => self.inverse.encode(enc, &self.z, Direction::Inverse),
+            _ => self
+                .demod
+                .record(&mut enc.begin_compute_pass(&Default::default())),
+        }
+    }
+
+    /// The spectrum (w × h complex) and windows (planes × w × h complex) buffers.
+    pub fn intermediates(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
+        (&self.spectrum, &self.z)
     }
 
     /// The x̂ planes (planes × w × h f32) the last `encode` wrote; they stay on the GPU.
