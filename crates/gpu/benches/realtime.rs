@@ -8,6 +8,7 @@
 
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
+use specmux_gpu::demux::STAGES;
 use specmux_gpu::fft::{Direction, GpuFft2};
 use specmux_gpu::{wgpu, GpuContext, GpuReconstructor};
 use specmux_twin::experiment::Experiment;
@@ -92,6 +93,64 @@ fn gpu_stages(ctx: &GpuContext, g: &GpuReconstructor, frame: &Cube, name: &str, 
     );
 }
 
+/// GPU time of each stage of one frame from timestamps written between them (None where the
+/// adapter has no timestamps inside encoders): the five demultiplexing stages and the unmixing.
+fn kernel_times(
+    ctx: &GpuContext,
+    g: &GpuReconstructor,
+    frame: &Cube,
+    repeats: usize,
+) -> Option<Vec<f64>> {
+    let need = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+    if !ctx.device.features().contains(need) {
+        return None;
+    }
+    let n = STAGES as u32 + 2;
+    let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+        label: None,
+        ty: wgpu::QueryType::Timestamp,
+        count: n,
+    });
+    let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: 8 * n as u64,
+        usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let staging = ctx.readback("timestamps", 8 * n as u64);
+    g.demux.upload(ctx, frame).unwrap();
+    let mut per_stage: Vec<Vec<f64>> = vec![Vec::new(); n as usize - 1];
+    for _ in 0..WARMUP + repeats {
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        enc.write_timestamp(&set, 0);
+        for s in 0..STAGES {
+            g.demux.encode_stage(&mut enc, s);
+            enc.write_timestamp(&set, s as u32 + 1);
+        }
+        g.unmix.encode(&mut enc);
+        enc.write_timestamp(&set, n - 1);
+        enc.resolve_query_set(&set, 0..n, &resolve, 0);
+        enc.copy_buffer_to_buffer(&resolve, 0, &staging, 0, 8 * n as u64);
+        ctx.queue.submit([enc.finish()]);
+        let mut t = vec![0u64; n as usize];
+        ctx.read_into(&staging, &mut t).unwrap();
+        let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
+        for (acc, w) in per_stage.iter_mut().zip(t.windows(2)) {
+            acc.push(w[1].wrapping_sub(w[0]) as f64 * period);
+        }
+    }
+    Some(
+        per_stage
+            .into_iter()
+            .map(|mut v| {
+                let mut v = v.split_off(WARMUP);
+                v.sort_by(f64::total_cmp);
+                v[v.len() / 2]
+            })
+            .collect(),
+    )
+}
+
 fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
     let lib = Library::default_root();
     let materials = Materials::load(&lib).expect("spectra/ is readable");
@@ -121,7 +180,7 @@ fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
         "unmix",
         "CPU",
         median(repeats, || {
-            drop(recon.unmixer.unmix_into(&xhat, &mut cube).unwrap())
+            recon.unmixer.unmix_into(&xhat, &mut cube).unwrap();
         }),
     );
     row(
@@ -136,6 +195,25 @@ fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
     let g = GpuReconstructor::new(ctx, &recon).unwrap();
     let mut gcube: Cube = g.output_cube();
     gpu_stages(ctx, &g, &frame, name, repeats);
+    if let Some(t) = kernel_times(ctx, &g, &frame, repeats) {
+        let names = [
+            "to complex",
+            "forward FFT",
+            "crop",
+            "inverse FFT (6 planes)",
+            "demodulate + mix",
+            "unmix (both kernels)",
+        ];
+        for (what, s) in names.iter().zip(&t) {
+            row(name, &format!("kernel: {what}"), "GPU timestamps", *s);
+        }
+        row(
+            name,
+            "kernels: demultiplex + unmix",
+            "GPU timestamps",
+            t.iter().sum(),
+        );
+    }
     row(
         name,
         "demultiplex, x̂ read back",
@@ -146,14 +224,16 @@ fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
         name,
         "demultiplex + unmix, cube stays on GPU",
         "GPU",
-        median(repeats, || drop(g.run_resident(ctx, &frame).unwrap())),
+        median(repeats, || {
+            g.run_resident(ctx, &frame).unwrap();
+        }),
     );
     row(
         name,
         "demultiplex + unmix, cube read back",
         "GPU",
         median(repeats, || {
-            drop(g.run_into(ctx, &frame, &mut gcube).unwrap())
+            g.run_into(ctx, &frame, &mut gcube).unwrap();
         }),
     );
 }

@@ -30,6 +30,10 @@ impl GpuContext {
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("specmux"),
             required_limits: adapter.limits(),
+            // GPU timestamps where the adapter has them (the bench's per-kernel times).
+            required_features: adapter.features()
+                & (wgpu::Features::TIMESTAMP_QUERY
+                    | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS),
             ..Default::default()
         }))
         .map_err(|e| GpuError::Device(e.to_string()))?;

@@ -1,6 +1,6 @@
 //! The per-pixel non-negative unmixing on the GPU (shaders/unmix.wgsl), built from the core's
-//! factored `Unmixer`: the fast path r = P x̂ for every pixel and, where a band goes negative,
-//! the exact dual active-set solve in f32. Counters of constrained pixels and iterations come
+//! factored `Unmixer`: the fast path r = P x̂ for every pixel and, for the pixels it queues
+//! (a band went negative), the exact dual active-set solve in f32. Counters of constrained pixels and iterations come
 //! back as the core's `UnmixStats`; a pixel that fails is an error, as on the CPU.
 
 use crate::context::{groups, GpuContext};
@@ -44,8 +44,8 @@ pub struct GpuUnmixer {
     pub bands: usize,
     pub channels: usize,
     npx: usize,
-    pipeline: wgpu::ComputePipeline,
-    bind: wgpu::BindGroup,
+    /// `project` and `solve_queued` with their bind groups.
+    kernels: [(wgpu::ComputePipeline, wgpu::BindGroup); 2],
     cube: wgpu::Buffer,
     stats: wgpu::Buffer,
     stats_staging: wgpu::Buffer,
@@ -67,15 +67,18 @@ impl GpuUnmixer {
         let uniform = ctx.uniform("unmix params", &params);
         let cube = ctx.storage("cube", (m * npx * 4) as u64);
         let stats = ctx.storage("unmix stats", 32);
+        let queue = ctx.storage("unmix queue", (npx * 4) as u64);
         let module = ctx.module("unmix", include_str!("shaders/unmix.wgsl"));
-        let pipeline = ctx.pipeline(&module, "unmix");
-        let bind = ctx.bind(&pipeline, &[xhat, &cube, &tables, &stats, &uniform]);
+        let kernels = ["project", "solve_queued"].map(|entry| {
+            let pipeline = ctx.pipeline(&module, entry);
+            let bind = ctx.bind(&pipeline, &[xhat, &cube, &tables, &stats, &uniform, &queue]);
+            (pipeline, bind)
+        });
         Ok(GpuUnmixer {
             bands: m,
             channels: c,
             npx,
-            pipeline,
-            bind,
+            kernels,
             cube_staging: ctx.readback("cube staging", (m * npx * 4) as u64),
             stats_staging: ctx.readback("unmix stats staging", 32),
             cube,
@@ -86,11 +89,12 @@ impl GpuUnmixer {
     /// Record the unmixing of the current `xhat` into `enc`, and the copy of its counters.
     pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
         enc.clear_buffer(&self.stats, 0, None);
-        {
+        // One pass per kernel: the solver reads the queue and count the projection wrote.
+        let g = groups(self.npx, WORKGROUP);
+        for (pipeline, bind) in &self.kernels {
             let mut cp = enc.begin_compute_pass(&Default::default());
-            cp.set_pipeline(&self.pipeline);
-            cp.set_bind_group(0, &self.bind, &[]);
-            let g = groups(self.npx, WORKGROUP);
+            cp.set_pipeline(pipeline);
+            cp.set_bind_group(0, bind, &[]);
             cp.dispatch_workgroups(g.min(65535), g.div_ceil(65535), 1);
         }
         enc.copy_buffer_to_buffer(&self.stats, 0, &self.stats_staging, 0, 32);

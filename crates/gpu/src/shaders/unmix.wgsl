@@ -1,8 +1,10 @@
-// Per-pixel non-negative unmixing, one invocation per pixel (crates/core/src/unmix.rs and
-// unmix/dual.rs do the same on the CPU): r = P x̂ (P = diag(gain)·B·H⁻¹Fᵀ); a pixel whose r has
-// a negative band is solved exactly by Goldfarb–Idnani's dual active-set method from the
-// unconstrained minimiser, min ½αᵀHα − gᵀα s.t. Bα ≥ 0, with J ≤ 8 variables and ≤ 64 bands,
-// in f32, step for step as the CPU's f64 code; the cube is max(Bα, 0)·gain.
+// Per-pixel non-negative unmixing (crates/core/src/unmix.rs and unmix/dual.rs do the same on
+// the CPU), in two kernels: `project` gives every pixel r = P x̂ (P = diag(gain)·B·H⁻¹Fᵀ) and
+// queues those with a negative band; `solve_queued` solves each queued pixel exactly by
+// Goldfarb–Idnani's dual active-set method from the unconstrained minimiser,
+// min ½αᵀHα − gᵀα s.t. Bα ≥ 0, with J ≤ 8 variables and ≤ 64 bands, in f32, step for step as
+// the CPU's f64 code; the cube is max(Bα, 0)·gain. Two kernels keep the solver's warps full of
+// pixels that need it, and the fast path's kernel small.
 
 struct Params {
     npx: u32,
@@ -27,8 +29,8 @@ struct Params {
 @group(0) @binding(0) var<storage, read> xhat: array<f32>;
 @group(0) @binding(1) var<storage, read_write> cube: array<f32>;
 @group(0) @binding(2) var<storage, read> tables: array<f32>;
-// [constrained pixels, bound pixels, total iterations, max iterations, no convergence,
-//  infeasible]
+// [constrained (= queued) pixels, bound pixels, total iterations, max iterations,
+//  no convergence, infeasible]
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 8>;
 @group(0) @binding(4) var<uniform> prm: Params;
 
@@ -45,7 +47,18 @@ var<private> rm: array<f32, 64>; // R, upper triangular: rm[i * 8 + k]
 var<private> act: array<u32, MAXB>;
 var<private> mu: array<f32, MAXB>;
 var<private> alpha: array<f32, MAXB>;
-var<private> in_w: array<bool, MAXM>;
+// The working set as a bit mask over the bands (two words of 32): 8 bytes of private memory
+// where a bool array took 256, and private arrays here live in the GPU's local memory.
+var<private> in_w: vec2<u32>;
+
+fn in_working_set(k: u32) -> bool {
+    return (in_w[k / 32u] & (1u << (k % 32u))) != 0u;
+}
+
+fn set_working(k: u32, on: bool) {
+    let bit = 1u << (k % 32u);
+    if on { in_w[k / 32u] |= bit; } else { in_w[k / 32u] &= ~bit; }
+}
 var<private> q: u32;
 
 fn basis(k: u32, j: u32) -> f32 {
@@ -128,7 +141,7 @@ fn most_violated(tol: f32) -> u32 {
     var worst = -tol;
     for (var k = 0u; k < prm.m; k++) {
         let v = s[k] * tables[prm.off_binv + k];
-        if !in_w[k] && v < worst {
+        if !in_working_set(k) && v < worst {
             worst = v;
             p = k;
         }
@@ -145,6 +158,7 @@ fn active_set(scale: f32) -> u32 {
         rm[i] = 0.0;
     }
     q = 0u;
+    in_w = vec2<u32>(0u, 0u);
     var iterations = 0u;
     loop {
         let p = most_violated(prm.tol * scale);
@@ -205,11 +219,11 @@ fn active_set(scale: f32) -> u32 {
                 for (var l = 0u; l < n; l++) { alpha[l] += t * z[l]; }
             }
             if dropped < MAXB {
-                in_w[act[dropped]] = false;
+                set_working(act[dropped], false);
                 drop_band(dropped);
             } else {
                 add_band(&d, p, mu_p);
-                in_w[p] = true;
+                set_working(p, true);
                 if q == n {
                     // n independent homogeneous constraints meet only at α = 0.
                     for (var l = 0u; l < MAXB; l++) { alpha[l] = 0.0; }
@@ -222,13 +236,19 @@ fn active_set(scale: f32) -> u32 {
     return iterations;
 }
 
-// The exact solution of a pixel with channel values x (its fast-path r was negative
-// somewhere): s ← max(Bα, 0)·gain, statistics counted.
-fn solve(x: ptr<function, array<f32, MAXC>>) {
+// Counters of this workgroup, added to `stats` once per workgroup: bound pixels, total
+// iterations, max iterations, no convergence, infeasible (stats[1..6]).
+var<workgroup> wg_stats: array<atomic<u32>, 5>;
+
+// The exact solution of pixel px: s ← max(Bα, 0)·gain, this workgroup's counters updated.
+// False when the active set failed (the pixel is counted, its bands are not written).
+fn solve(px: u32) -> bool {
+    var x: array<f32, MAXC>;
+    for (var i = 0u; i < prm.c; i++) { x[i] = xhat[i * prm.npx + px]; }
     for (var j = 0u; j < MAXB; j++) {
         var acc = 0.0;
         if j < prm.n {
-            for (var i = 0u; i < prm.c; i++) { acc += tables[prm.off_unc + j * prm.c + i] * (*x)[i]; }
+            for (var i = 0u; i < prm.c; i++) { acc += tables[prm.off_unc + j * prm.c + i] * x[i]; }
         }
         alpha[j] = acc;
     }
@@ -236,33 +256,71 @@ fn solve(x: ptr<function, array<f32, MAXC>>) {
     var scale = 0.0;
     for (var k = 0u; k < prm.m; k++) { scale = max(scale, abs(s[k])); }
     let it = active_set(scale);
-    atomicAdd(&stats[0], 1u);
-    if it == 0xffffffffu { atomicAdd(&stats[4], 1u); return; }
-    if it == 0xfffffffeu { atomicAdd(&stats[5], 1u); return; }
-    if q > 0u { atomicAdd(&stats[1], 1u); }
-    atomicAdd(&stats[2], it);
-    atomicMax(&stats[3], it);
+    if it == 0xffffffffu { atomicAdd(&wg_stats[3], 1u); return false; }
+    if it == 0xfffffffeu { atomicAdd(&wg_stats[4], 1u); return false; }
+    if q > 0u { atomicAdd(&wg_stats[0], 1u); }
+    atomicAdd(&wg_stats[1], it);
+    atomicMax(&wg_stats[2], it);
     for (var k = 0u; k < prm.m; k++) {
         s[k] = max(s[k], 0.0) * tables[prm.off_gain + k];
     }
+    return true;
 }
 
+// Pixels whose fast-path spectrum went negative, in the order they were queued; their count
+// is stats[0].
+@group(0) @binding(5) var<storage, read_write> queue: array<u32>;
+
+var<workgroup> wg_count: atomic<u32>;
+var<workgroup> wg_base: u32;
+
+// The fast path for every pixel: r = P x̂ (in the CPU's order of summation) written to the
+// cube; a pixel with a negative band is queued for `solve_queued`. A workgroup reserves its
+// queue slots with one global atomic.
 @compute @workgroup_size(64)
-fn unmix(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let px = gid.x + gid.y * 65535u * 64u;
-    if px >= prm.npx { return; }
-    var x: array<f32, MAXC>;
-    for (var i = 0u; i < prm.c; i++) { x[i] = xhat[i * prm.npx + px]; }
-    // The fast path: r = P x̂, in the CPU's order of summation.
-    var minr = BIG;
-    for (var k = 0u; k < prm.m; k++) {
-        var acc = tables[k * prm.c] * x[0];
-        for (var i = 1u; i < prm.c; i++) { acc += tables[k * prm.c + i] * x[i]; }
-        s[k] = acc;
-        minr = min(minr, acc);
+    var slot = 0xffffffffu;
+    if px < prm.npx {
+        var x: array<f32, MAXC>;
+        for (var i = 0u; i < prm.c; i++) { x[i] = xhat[i * prm.npx + px]; }
+        var minr = BIG;
+        for (var k = 0u; k < prm.m; k++) {
+            var acc = tables[k * prm.c] * x[0];
+            for (var i = 1u; i < prm.c; i++) { acc += tables[k * prm.c + i] * x[i]; }
+            cube[k * prm.npx + px] = acc;
+            minr = min(minr, acc);
+        }
+        if minr < 0.0 {
+            slot = atomicAdd(&wg_count, 1u);
+        }
     }
-    if minr < 0.0 {
-        solve(&x);
+    workgroupBarrier();
+    if lid == 0u {
+        wg_base = atomicAdd(&stats[0], atomicLoad(&wg_count));
     }
-    for (var k = 0u; k < prm.m; k++) { cube[k * prm.npx + px] = s[k]; }
+    workgroupBarrier();
+    if slot != 0xffffffffu {
+        queue[wg_base + slot] = px;
+    }
+}
+
+// The exact solve of each queued pixel, its bands overwriting the fast path's.
+@compute @workgroup_size(64)
+fn solve_queued(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = gid.x + gid.y * 65535u * 64u;
+    if i < atomicLoad(&stats[0]) {
+        let px = queue[i];
+        if solve(px) {
+            for (var k = 0u; k < prm.m; k++) { cube[k * prm.npx + px] = s[k]; }
+        }
+    }
+    workgroupBarrier();
+    if lid == 0u {
+        atomicAdd(&stats[1], atomicLoad(&wg_stats[0]));
+        atomicAdd(&stats[2], atomicLoad(&wg_stats[1]));
+        atomicMax(&stats[3], atomicLoad(&wg_stats[2]));
+        atomicAdd(&stats[4], atomicLoad(&wg_stats[3]));
+        atomicAdd(&stats[5], atomicLoad(&wg_stats[4]));
+    }
 }

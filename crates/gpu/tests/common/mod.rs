@@ -1,6 +1,9 @@
 //! Shared by the GPU tests: open the adapter, or say there is none and skip. Only a missing
 //! adapter skips; any other failure to open one fails the test.
 
+// Each test file uses only some of these helpers.
+#![allow(dead_code)]
+
 use specmux_gpu::{GpuContext, GpuError};
 
 /// The GPU context, or None (with one printed line) when this machine has no adapter.
