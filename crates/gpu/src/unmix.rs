@@ -8,8 +8,9 @@ use crate::error::{GpuError, Result};
 use specmux_core::unmix::{UnmixStats, Unmixer, MAX_BANDS, MAX_BASIS, MAX_CHANNELS};
 use specmux_core::Cube;
 
-// The kernel's private arrays are sized MAXB = 8, MAXM = 64, MAXC = 16: the core's limits,
-// which `Unmixer::new` enforces.
+// shaders/unmix.wgsl declares these maxima (replaced by the rig's sizes, which
+// `Unmixer::new` keeps within them), reads L⁻ᵀ with the core's stride of 8 and keeps the
+// working set in a 64-bit mask.
 const _: () = assert!(MAX_BASIS == 8 && MAX_BANDS == 64 && MAX_CHANNELS == 16);
 
 /// Threads per workgroup of the unmixing kernel.
@@ -26,9 +27,6 @@ pub const DEPENDENT: f32 = 1e-10;
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct Params {
     npx: u32,
-    n: u32,
-    m: u32,
-    c: u32,
     off_unc: u32,
     off_basis: u32,
     off_binv: u32,
@@ -36,7 +34,6 @@ struct Params {
     off_linv: u32,
     tol: f32,
     dependent: f32,
-    _pad: u32,
 }
 
 /// The unmixer of one rig and frame size, bound to its input planes on the GPU.
@@ -68,7 +65,7 @@ impl GpuUnmixer {
         let cube = ctx.storage("cube", (m * npx * 4) as u64);
         let stats = ctx.storage("unmix stats", 32);
         let queue = ctx.storage("unmix queue", (npx * 4) as u64);
-        let module = ctx.module("unmix", include_str!("shaders/unmix.wgsl"));
+        let module = ctx.module("unmix", &source(unmixer));
         let kernels = ["project", "solve_queued"].map(|entry| {
             let pipeline = ctx.pipeline(&module, entry);
             let bind = ctx.bind(&pipeline, &[xhat, &cube, &tables, &stats, &uniform, &queue]);
@@ -148,11 +145,27 @@ impl GpuUnmixer {
     }
 }
 
+/// shaders/unmix.wgsl with the rig's J, bands and channels written over its maxima.
+fn source(unmixer: &Unmixer) -> String {
+    let sizes = [
+        ("MAXB", MAX_BASIS, unmixer.basis_len()),
+        ("MAXM", MAX_BANDS, unmixer.bands()),
+        ("MAXC", MAX_CHANNELS, unmixer.channels()),
+    ];
+    let mut src = include_str!("shaders/unmix.wgsl").to_string();
+    for (name, max, value) in sizes {
+        let line = format!("const {name}: u32 = {max}u;");
+        assert!(src.contains(&line), "shaders/unmix.wgsl declares {line}");
+        src = src.replace(&line, &format!("const {name}: u32 = {value}u;"));
+    }
+    src
+}
+
 /// The tables of shaders/unmix.wgsl in one f32 buffer — P, M, B (row-major), 1/‖b_k‖,
 /// gains, L⁻ᵀ — and the parameters that locate them.
 fn pack(unmixer: &Unmixer, npx: usize) -> (Vec<f32>, Params) {
     let t = unmixer.tables();
-    let (n, m, c) = (unmixer.basis_len(), unmixer.bands(), unmixer.channels());
+    let m = unmixer.bands();
     let mut v: Vec<f32> = t.projection.to_vec();
     let off_unc = v.len() as u32;
     v.extend(t.unconstrained.iter().map(|&x| x as f32));
@@ -166,9 +179,6 @@ fn pack(unmixer: &Unmixer, npx: usize) -> (Vec<f32>, Params) {
     v.extend(t.linv_t.iter().flatten().map(|&x| x as f32));
     let params = Params {
         npx: npx as u32,
-        n: n as u32,
-        m: m as u32,
-        c: c as u32,
         off_unc,
         off_basis,
         off_binv,
@@ -176,7 +186,6 @@ fn pack(unmixer: &Unmixer, npx: usize) -> (Vec<f32>, Params) {
         off_linv,
         tol: TOL,
         dependent: DEPENDENT,
-        _pad: 0,
     };
     (v, params)
 }

@@ -8,12 +8,8 @@
 
 struct Params {
     npx: u32,
-    // J, bands, channels.
-    n: u32,
-    m: u32,
-    c: u32,
-    // Offsets into `tables` of M (n × c), B (m × n row-major), 1/‖b_k‖ (m), gains (m),
-    // L⁻ᵀ (8 × 8 column-major); P (m × c) is at 0.
+    // Offsets into `tables` of M (J × channels), B (bands × J row-major), 1/‖b_k‖ (bands),
+    // gains (bands), L⁻ᵀ (8 × 8 column-major); P (bands × channels) is at 0.
     off_unc: u32,
     off_basis: u32,
     off_binv: u32,
@@ -23,7 +19,6 @@ struct Params {
     // active ones when ‖d₂‖² ≤ dependent·‖d‖² (f32 values of the CPU's 1e-12 and 1e-13).
     tol: f32,
     dependent: f32,
-    _pad: u32,
 }
 
 @group(0) @binding(0) var<storage, read> xhat: array<f32>;
@@ -34,6 +29,9 @@ struct Params {
 @group(0) @binding(3) var<storage, read_write> stats: array<atomic<u32>, 8>;
 @group(0) @binding(4) var<uniform> prm: Params;
 
+// J, bands and channels of the rig: GpuUnmixer::new writes the rig's values over these
+// maxima before compiling, so every array has its exact size and every loop a constant trip
+// count (the compiler can keep the solver's state in registers rather than local memory).
 const MAXB: u32 = 8u;
 const MAXM: u32 = 64u;
 const MAXC: u32 = 16u;
@@ -42,8 +40,8 @@ const MAX_ITERATIONS: u32 = 500u;
 const BIG: f32 = 3.0e38;
 
 var<private> s: array<f32, MAXM>;
-var<private> jm: array<f32, 64>; // J = L⁻ᵀQ, column-major: jm[col * 8 + row]
-var<private> rm: array<f32, 64>; // R, upper triangular: rm[i * 8 + k]
+var<private> jm: array<f32, MAXB * MAXB>; // J = L⁻ᵀQ, column-major: jm[col * MAXB + row]
+var<private> rm: array<f32, MAXB * MAXB>; // R, upper triangular: rm[i * MAXB + k]
 var<private> act: array<u32, MAXB>;
 var<private> mu: array<f32, MAXB>;
 var<private> alpha: array<f32, MAXB>;
@@ -62,14 +60,14 @@ fn set_working(k: u32, on: bool) {
 var<private> q: u32;
 
 fn basis(k: u32, j: u32) -> f32 {
-    return tables[prm.off_basis + k * prm.n + j];
+    return tables[prm.off_basis + k * MAXB + j];
 }
 
 // s = Bα on the bands.
 fn spectrum() {
-    for (var k = 0u; k < prm.m; k++) {
+    for (var k = 0u; k < MAXM; k++) {
         var acc = 0.0;
-        for (var j = 0u; j < prm.n; j++) {
+        for (var j = 0u; j < MAXB; j++) {
             acc += basis(k, j) * alpha[j];
         }
         s[k] = acc;
@@ -79,16 +77,16 @@ fn spectrum() {
 // Columns a and b of J: a ← c·a + sn·b, b ← c·b − sn·a.
 fn rotate_columns(a: u32, b: u32, c: f32, sn: f32) {
     for (var i = 0u; i < MAXB; i++) {
-        let x = jm[a * 8u + i];
-        let y = jm[b * 8u + i];
-        jm[a * 8u + i] = c * x + sn * y;
-        jm[b * 8u + i] = c * y - sn * x;
+        let x = jm[a * MAXB + i];
+        let y = jm[b * MAXB + i];
+        jm[a * MAXB + i] = c * x + sn * y;
+        jm[b * MAXB + i] = c * y - sn * x;
     }
 }
 
 // Add band `band` with multiplier `mu_p`, given d = Jᵀb: rotate d's tail into d[q].
 fn add_band(d: ptr<function, array<f32, MAXB>>, band: u32, mu_p: f32) {
-    for (var i = prm.n - 1u; i > q; i--) {
+    for (var i = MAXB - 1u; i > q; i--) {
         let x = (*d)[i - 1u];
         let y = (*d)[i];
         let h = sqrt(x * x + y * y);
@@ -99,7 +97,7 @@ fn add_band(d: ptr<function, array<f32, MAXB>>, band: u32, mu_p: f32) {
         }
     }
     for (var i = 0u; i <= q; i++) {
-        rm[i * 8u + q] = (*d)[i];
+        rm[i * MAXB + q] = (*d)[i];
     }
     act[q] = band;
     mu[q] = mu_p;
@@ -111,23 +109,23 @@ fn add_band(d: ptr<function, array<f32, MAXB>>, band: u32, mu_p: f32) {
 fn drop_band(l: u32) {
     for (var k = l; k + 1u < q; k++) {
         for (var i = 0u; i <= k + 1u; i++) {
-            rm[i * 8u + k] = rm[i * 8u + k + 1u];
+            rm[i * MAXB + k] = rm[i * MAXB + k + 1u];
         }
         act[k] = act[k + 1u];
         mu[k] = mu[k + 1u];
     }
     for (var i = l; i + 1u < q; i++) {
-        let x = rm[i * 8u + i];
-        let y = rm[(i + 1u) * 8u + i];
+        let x = rm[i * MAXB + i];
+        let y = rm[(i + 1u) * MAXB + i];
         let h = sqrt(x * x + y * y);
         if h > 0.0 {
             let c = x / h;
             let sn = y / h;
             for (var k = i; k + 1u < q; k++) {
-                let a = rm[i * 8u + k];
-                let b = rm[(i + 1u) * 8u + k];
-                rm[i * 8u + k] = c * a + sn * b;
-                rm[(i + 1u) * 8u + k] = c * b - sn * a;
+                let a = rm[i * MAXB + k];
+                let b = rm[(i + 1u) * MAXB + k];
+                rm[i * MAXB + k] = c * a + sn * b;
+                rm[(i + 1u) * MAXB + k] = c * b - sn * a;
             }
             rotate_columns(i, i + 1u, c, sn);
         }
@@ -139,7 +137,7 @@ fn drop_band(l: u32) {
 fn most_violated(tol: f32) -> u32 {
     var p = MAXM;
     var worst = -tol;
-    for (var k = 0u; k < prm.m; k++) {
+    for (var k = 0u; k < MAXM; k++) {
         let v = s[k] * tables[prm.off_binv + k];
         if !in_working_set(k) && v < worst {
             worst = v;
@@ -152,10 +150,13 @@ fn most_violated(tol: f32) -> u32 {
 // Goldfarb–Idnani from α = the unconstrained minimiser (s = Bα). Returns the iterations, or
 // 0xffffffff when it did not converge, 0xfffffffe when no step is finite (infeasible).
 fn active_set(scale: f32) -> u32 {
-    let n = prm.n;
-    for (var i = 0u; i < 64u; i++) {
-        jm[i] = tables[prm.off_linv + i];
-        rm[i] = 0.0;
+    let n = MAXB;
+    // L⁻ᵀ is stored with the core's stride of 8.
+    for (var col = 0u; col < MAXB; col++) {
+        for (var row = 0u; row < MAXB; row++) {
+            jm[col * MAXB + row] = tables[prm.off_linv + col * 8u + row];
+            rm[col * MAXB + row] = 0.0;
+        }
     }
     q = 0u;
     in_w = vec2<u32>(0u, 0u);
@@ -180,20 +181,20 @@ fn active_set(scale: f32) -> u32 {
                 z[i] = 0.0;
                 rr[i] = 0.0;
                 var acc = 0.0;
-                for (var r = 0u; r < n; r++) { acc += jm[i * 8u + r] * bp[r]; }
+                for (var r = 0u; r < n; r++) { acc += jm[i * MAXB + r] * bp[r]; }
                 d[i] = acc;
                 dd += acc * acc;
                 if i >= q && i < n { d2 += acc * acc; }
             }
             // Primal direction z = J₂d₂, dual direction rr = R⁻¹d₁.
             for (var i = q; i < n; i++) {
-                for (var l = 0u; l < MAXB; l++) { z[l] += jm[i * 8u + l] * d[i]; }
+                for (var l = 0u; l < MAXB; l++) { z[l] += jm[i * MAXB + l] * d[i]; }
             }
             for (var ii = 0u; ii < q; ii++) {
                 let i = q - 1u - ii;
                 var acc = 0.0;
-                for (var k = i + 1u; k < q; k++) { acc += rm[i * 8u + k] * rr[k]; }
-                rr[i] = (d[i] - acc) / rm[i * 8u + i];
+                for (var k = i + 1u; k < q; k++) { acc += rm[i * MAXB + k] * rr[k]; }
+                rr[i] = (d[i] - acc) / rm[i * MAXB + i];
             }
             // Partial step: the first active multiplier to reach zero.
             var t1 = BIG;
@@ -244,24 +245,24 @@ var<workgroup> wg_stats: array<atomic<u32>, 5>;
 // False when the active set failed (the pixel is counted, its bands are not written).
 fn solve(px: u32) -> bool {
     var x: array<f32, MAXC>;
-    for (var i = 0u; i < prm.c; i++) { x[i] = xhat[i * prm.npx + px]; }
+    for (var i = 0u; i < MAXC; i++) { x[i] = xhat[i * prm.npx + px]; }
     for (var j = 0u; j < MAXB; j++) {
         var acc = 0.0;
-        if j < prm.n {
-            for (var i = 0u; i < prm.c; i++) { acc += tables[prm.off_unc + j * prm.c + i] * x[i]; }
+        if j < MAXB {
+            for (var i = 0u; i < MAXC; i++) { acc += tables[prm.off_unc + j * MAXC + i] * x[i]; }
         }
         alpha[j] = acc;
     }
     spectrum();
     var scale = 0.0;
-    for (var k = 0u; k < prm.m; k++) { scale = max(scale, abs(s[k])); }
+    for (var k = 0u; k < MAXM; k++) { scale = max(scale, abs(s[k])); }
     let it = active_set(scale);
     if it == 0xffffffffu { atomicAdd(&wg_stats[3], 1u); return false; }
     if it == 0xfffffffeu { atomicAdd(&wg_stats[4], 1u); return false; }
     if q > 0u { atomicAdd(&wg_stats[0], 1u); }
     atomicAdd(&wg_stats[1], it);
     atomicMax(&wg_stats[2], it);
-    for (var k = 0u; k < prm.m; k++) {
+    for (var k = 0u; k < MAXM; k++) {
         s[k] = max(s[k], 0.0) * tables[prm.off_gain + k];
     }
     return true;
@@ -283,11 +284,11 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
     var slot = 0xffffffffu;
     if px < prm.npx {
         var x: array<f32, MAXC>;
-        for (var i = 0u; i < prm.c; i++) { x[i] = xhat[i * prm.npx + px]; }
+        for (var i = 0u; i < MAXC; i++) { x[i] = xhat[i * prm.npx + px]; }
         var minr = BIG;
-        for (var k = 0u; k < prm.m; k++) {
-            var acc = tables[k * prm.c] * x[0];
-            for (var i = 1u; i < prm.c; i++) { acc += tables[k * prm.c + i] * x[i]; }
+        for (var k = 0u; k < MAXM; k++) {
+            var acc = tables[k * MAXC] * x[0];
+            for (var i = 1u; i < MAXC; i++) { acc += tables[k * MAXC + i] * x[i]; }
             cube[k * prm.npx + px] = acc;
             minr = min(minr, acc);
         }
@@ -312,7 +313,7 @@ fn solve_queued(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_in
     if i < atomicLoad(&stats[0]) {
         let px = queue[i];
         if solve(px) {
-            for (var k = 0u; k < prm.m; k++) { cube[k * prm.npx + px] = s[k]; }
+            for (var k = 0u; k < MAXM; k++) { cube[k * prm.npx + px] = s[k]; }
         }
     }
     workgroupBarrier();
