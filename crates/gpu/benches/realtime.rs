@@ -255,6 +255,9 @@ fn main() {
         "adapter: {}; CPU threads: {threads}; median of {repeats} runs, ms\n",
         ctx.adapter_name()
     );
+    if ctx.is_software() {
+        println!("(a software adapter: its GPU rows say nothing of a GPU's speed)\n");
+    }
     println!("| scene | stage | device | median ms |\n| --- | --- | --- | --- |");
     row(
         "—",
