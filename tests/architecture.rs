@@ -93,6 +93,19 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         ],
     ),
     (
+        "gpu",
+        // The device, then the kernels in the order the reconstruction runs them.
+        &[
+            &["error"],
+            &["context"],
+            &["backend"],
+            &["fft"],
+            &["demux"],
+            &["unmix"],
+            &["reconstructor"],
+        ],
+    ),
+    (
         "report",
         &[
             &["plot"],

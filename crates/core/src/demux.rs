@@ -196,6 +196,17 @@ impl Demux {
         Ok(self)
     }
 
+    /// The frame width and height this demultiplexer was planned for.
+    pub fn size(&self) -> (usize, usize) {
+        (self.fft.w, self.fft.h)
+    }
+
+    /// The window's weights on the wx × wy box (row-major from (−⌊wx/2⌋, −⌊wy/2⌋)); None for
+    /// the square window (all ones). Another implementation of `extract` (the GPU's) reads it.
+    pub fn taper(&self) -> Option<&[f32]> {
+        self.taper.as_deref()
+    }
+
     /// The forward spectrum of a frame.
     pub fn spectrum(&self, frame: &[f32]) -> HalfSpectrum {
         self.fft.forward(frame)

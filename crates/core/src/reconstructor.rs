@@ -46,6 +46,20 @@ pub enum CrosstalkCorrection {
     None,
 }
 
+/// Where the reconstruction runs (`[compute] device`): the GPU backend is the crate
+/// specmux-gpu, behind the binary's `gpu` feature.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ComputeDevice {
+    /// The CPU (this crate).
+    #[default]
+    Cpu,
+    /// The GPU; an error where no adapter opens.
+    Gpu,
+    /// The GPU where an adapter opens, else the CPU (said in one line).
+    Auto,
+}
+
 /// Reconstruction settings (`[reconstruct]`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

@@ -61,6 +61,23 @@ pub struct Unmixer {
     condition: f64,
 }
 
+/// The factored problem as plain tables, for another implementation of the same solver (the
+/// GPU backend's kernel): everything [`Unmixer::solve_pixel`] and the fast path read.
+pub struct UnmixTables<'a> {
+    /// M = H⁻¹Fᵀ, row-major J × channels: α_unc = M x̂.
+    pub unconstrained: &'a [f64],
+    /// diag(gain)·B·M, row-major bands × channels, in f32 (the fast path's map x̂ → r).
+    pub projection: &'a [f32],
+    /// B by columns, each zero-padded to `MAX_BANDS`.
+    pub basis_columns: &'a [[f64; MAX_BANDS]],
+    /// 1/‖b_k‖ for each band (0 for a zero row).
+    pub band_inv_norm: &'a [f64],
+    /// Per-band output gains.
+    pub gains: &'a [f64],
+    /// L⁻ᵀ for H = LLᵀ, column-major (`linv_t[col][row]`), zero-padded.
+    pub linv_t: &'a [[f64; MAX_BASIS]; MAX_BASIS],
+}
+
 /// How one pixel was solved.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolveInfo {
@@ -203,6 +220,18 @@ impl Unmixer {
 
     pub fn basis_len(&self) -> usize {
         self.n
+    }
+
+    /// The factored problem's tables (see [`UnmixTables`]).
+    pub fn tables(&self) -> UnmixTables<'_> {
+        UnmixTables {
+            unconstrained: &self.mx,
+            projection: &self.p32,
+            basis_columns: &self.bt,
+            band_inv_norm: &self.b_inv_norm,
+            gains: &self.gain,
+            linv_t: &self.linv_t,
+        }
     }
 
     /// Condition number of H.

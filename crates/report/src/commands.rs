@@ -1,8 +1,10 @@
 //! One function per CLI command: run the library, write the files, return the text to print.
 
 use crate::plot::Colorimetry;
+use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::{Grid, Library};
-use specmux_core::{Error, Result};
+use specmux_core::unmix::UnmixStats;
+use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
 use specmux_twin::experiment::Experiment;
@@ -44,6 +46,94 @@ pub fn experiment_for(scene: &str, size: Option<usize>) -> Result<Experiment> {
 
 fn load(path: &Path) -> Result<Experiment> {
     Experiment::load(path)
+}
+
+/// One frame's cube and unmixing counters on the device `[compute] device` names, with a line
+/// of stage times. The GPU (feature `gpu`) runs the `fourier` chain: demultiplex, crosstalk
+/// mix, unmix; GAP is not on the GPU yet, so `gpu` with GAP is an error and `auto` with GAP, or
+/// without an adapter, stays on the CPU and says so in one line.
+fn reconstruct_on_device(
+    exp: &Experiment,
+    recon: &Reconstructor,
+    frame: &Cube,
+) -> Result<(Cube, UnmixStats, String)> {
+    let fourier = recon.gap.is_none();
+    match (exp.compute.device, fourier) {
+        (ComputeDevice::Cpu, _) => {}
+        (ComputeDevice::Gpu, false) => {
+            return Err(Error::config(
+                &exp.file,
+                "compute.device",
+                "gpu",
+                "GAP and GAP-TV are not on the GPU yet: set [reconstruct.gap] method = \"fourier\" or device = \"cpu\"",
+            ))
+        }
+        (ComputeDevice::Auto, false) => {
+            eprintln!("compute device auto: GAP is not on the GPU yet; reconstructing on the CPU")
+        }
+        (_, true) => {
+            if let Some(done) = gpu::reconstruct(exp, recon, frame)? {
+                return Ok(done);
+            }
+        }
+    }
+    let r = recon.run(frame, None)?;
+    let [t_demux, t_gap, t_unmix] = r.seconds;
+    let times =
+        format!("CPU: demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s");
+    Ok((r.cube, r.unmix, times))
+}
+
+/// The GPU's `fourier` chain (specmux-gpu), or None where `auto` found no adapter.
+#[cfg(feature = "gpu")]
+mod gpu {
+    use super::*;
+
+    pub fn reconstruct(
+        exp: &Experiment,
+        recon: &Reconstructor,
+        frame: &Cube,
+    ) -> Result<Option<(Cube, UnmixStats, String)>> {
+        let err = |e: specmux_gpu::GpuError| Error::Numerical(e.to_string());
+        let Some(ctx) = specmux_gpu::backend::open(exp.compute.device).map_err(err)? else {
+            return Ok(None);
+        };
+        let t = std::time::Instant::now();
+        let g = specmux_gpu::GpuReconstructor::new(&ctx, recon).map_err(err)?;
+        let t_setup = t.elapsed().as_secs_f64();
+        let mut cube = g.output_cube();
+        let t = std::time::Instant::now();
+        let stats = g.run_into(&ctx, frame, &mut cube).map_err(err)?;
+        let times = format!(
+            "GPU {}: setup {t_setup:.4} s, demultiplex + unmix {:.4} s (first frame)",
+            ctx.adapter_name(),
+            t.elapsed().as_secs_f64()
+        );
+        Ok(Some((cube, stats, times)))
+    }
+}
+
+/// Without the `gpu` feature: `gpu` is an error, `auto` stays on the CPU and says so.
+#[cfg(not(feature = "gpu"))]
+mod gpu {
+    use super::*;
+
+    pub fn reconstruct(
+        exp: &Experiment,
+        _: &Reconstructor,
+        _: &Cube,
+    ) -> Result<Option<(Cube, UnmixStats, String)>> {
+        if exp.compute.device == ComputeDevice::Gpu {
+            return Err(Error::config(
+                &exp.file,
+                "compute.device",
+                "gpu",
+                "this specmux was built without the GPU backend: cargo build --release --features gpu",
+            ));
+        }
+        eprintln!("compute device auto: built without the gpu feature; reconstructing on the CPU");
+        Ok(None)
+    }
 }
 
 fn band_names(grid: &Grid) -> Vec<String> {
@@ -445,17 +535,16 @@ pub fn reconstruct(
     // The calibration frames of this rig, as the twin captures them.
     let (sim, _) = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?.run()?;
     let recon = run::reconstructor(&exp, &rig, &sim)?;
-    let r = recon.run(&frame, None)?;
-    let [t_demux, t_gap, t_unmix] = r.seconds;
+    let (cube, stats, times) = reconstruct_on_device(&exp, &recon, &frame)?;
     say!(
         text,
-        "demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s ({} pixels bound by r ≥ 0)",
-        r.unmix.constrained_pixels
+        "{times} ({} pixels bound by r ≥ 0)",
+        stats.constrained_pixels
     );
     let files = OutputSet::begin(out)?;
-    exr_io::write(&files.path("cube.exr"), &r.cube, &band_names(&grid))?;
+    exr_io::write(&files.path("cube.exr"), &cube, &band_names(&grid))?;
     if let Some((tp, tc)) = truth {
-        let m = specmux_core::metrics::compare(&tc, &r.cube)?;
+        let m = specmux_core::metrics::compare(&tc, &cube)?;
         say!(
             text,
             "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {}°",

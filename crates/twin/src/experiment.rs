@@ -15,7 +15,7 @@ use crate::sensor::{CameraConfig, SensorConfig};
 use crate::timing::TimingConfig;
 use serde::{Deserialize, Serialize};
 use specmux_core::carriers::{self, Carrier, CarrierConfig};
-use specmux_core::reconstructor::ReconConfig;
+use specmux_core::reconstructor::{ComputeDevice, ReconConfig};
 use specmux_core::{Error, Result};
 use std::path::Path;
 
@@ -27,9 +27,18 @@ pub struct Experiment {
     pub rig: RigConfig,
     pub calibration: CaptureConfig,
     pub reconstruct: ReconConfig,
+    /// Where the reconstruction runs (`[compute]`).
+    pub compute: ComputeConfig,
     /// The file it came from (for messages and relative paths); not part of the TOML.
     #[serde(skip)]
     pub file: String,
+}
+
+/// `[compute]`: the device the reconstruction runs on ("cpu", the default; "gpu"; "auto").
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ComputeConfig {
+    pub device: ComputeDevice,
 }
 
 /// The rig, one field per module of the light path. An absent optional section is a stage that
@@ -217,6 +226,10 @@ mod tests {
             Experiment::from_toml("[reconstruct]\ncrop = 0.25\netaa = 3\n", "t.toml").unwrap_err();
         let s = e.to_string();
         assert!(s.contains("t.toml:3") && s.contains("etaa"), "{s}");
+        let e = Experiment::from_toml("[compute]\ndevice = \"tpu\"\n", "t.toml").unwrap_err();
+        assert!(e.to_string().contains("tpu"), "{e}");
+        let e = Experiment::from_toml("[compute]\ndevice = \"auto\"\n", "t.toml").unwrap();
+        assert_eq!(e.compute.device, ComputeDevice::Auto);
         let e = Experiment::from_toml("[reconstruct]\neta = -1\n", "t.toml").unwrap_err();
         assert!(e.to_string().contains("reconstruct.eta"), "{e}");
         let e = Experiment::from_toml("[scene]\nwavelengths_nm = [400, 700, -10]\n", "t.toml")
