@@ -38,7 +38,9 @@ fn json_err(e: serde_json::Error) -> PyErr {
 /// The spectral library: `spectra` if given, else `$SPECMUX_SPECTRA`, else the `spectra/`
 /// folder of the source tree this module was built from (a compile-time path).
 fn library(spectra: Option<PathBuf>) -> Library {
-    spectra.map(Library::new).unwrap_or_else(Library::default_root)
+    spectra
+        .map(Library::new)
+        .unwrap_or_else(Library::default_root)
 }
 
 /// A cube as a (planes, height, width) float32 array (moves the data, no copy).
@@ -67,9 +69,9 @@ fn to_cube(a: &Bound<'_, PyAny>, what: &str) -> PyResult<Cube> {
     let np = a.py().import("numpy")?;
     let f32 = np.getattr("float32")?;
     let arr = np.call_method1("ascontiguousarray", (a, f32))?;
-    let arr: PyReadonlyArrayDyn<f32> = arr.extract().map_err(|_| {
-        SpecmuxError::new_err(format!("{what}: expected a real numpy array"))
-    })?;
+    let arr: PyReadonlyArrayDyn<f32> = arr
+        .extract()
+        .map_err(|_| SpecmuxError::new_err(format!("{what}: expected a real numpy array")))?;
     let shape = arr.shape().to_vec();
     let (planes, height, width) = match shape.as_slice() {
         [h, w] => (1, *h, *w),
@@ -118,10 +120,7 @@ impl PyExperiment {
     #[staticmethod]
     #[pyo3(signature = (d, file = "<dict>"))]
     fn from_dict(py: Python<'_>, d: &Bound<'_, PyDict>, file: &str) -> PyResult<Self> {
-        let text: String = py
-            .import("json")?
-            .call_method1("dumps", (d,))?
-            .extract()?;
+        let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
         let mut e: Experiment = serde_json::from_str(&text)
             .map_err(|x| SpecmuxError::new_err(format!("{file}: {x}")))?;
         e.file = file.to_string();
@@ -221,7 +220,10 @@ fn simulate<'py>(
         })
         .map_err(err)?;
     let d = PyDict::new(py);
-    let stages: Vec<(String, f64)> = stages.into_iter().map(|s| (s.stage.to_string(), s.seconds)).collect();
+    let stages: Vec<(String, f64)> = stages
+        .into_iter()
+        .map(|s| (s.stage.to_string(), s.seconds))
+        .collect();
     d.set_item("raw", sim.raw)?;
     d.set_item("full_scale", sim.full_scale)?;
     d.set_item("stages", stages)?;
