@@ -113,6 +113,8 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["commands"],
         ],
     ),
+    // The Python bindings are one file (src/lib.rs, the crate root): no modules to order.
+    ("python", &[]),
 ];
 
 /// Crates that `crates/core` must not depend on.

@@ -1,0 +1,108 @@
+"""Tests of the specmux Python package (pip install ./python; see docs/python.md)."""
+
+import os
+import re
+import subprocess
+
+import numpy as np
+import pytest
+
+import specmux
+
+SIZE = 64
+
+
+@pytest.fixture(scope="module")
+def exp():
+    e = specmux.Experiment.prototype()
+    e.size = (SIZE, SIZE)
+    return e
+
+
+@pytest.fixture(scope="module")
+def sim(exp):
+    return specmux.simulate(exp)
+
+
+@pytest.fixture(scope="module")
+def cube(exp, sim):
+    return specmux.reconstruct(exp, sim["frame"])
+
+
+def cli_psnr(tmp_path):
+    """The final cube's PSNR that `specmux demo --size 64` prints (row `unmix  r (true cube)`)."""
+    binary = os.environ.get("SPECMUX_BIN")
+    if not binary:
+        pytest.skip("SPECMUX_BIN not set (.ci/python-check.sh sets it to the built CLI)")
+    out = subprocess.run(
+        [binary, "demo", "--size", str(SIZE), "--out", str(tmp_path / "demo")],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
+    for line in out.splitlines():
+        m = re.match(r"unmix\s+r \(true cube\)\s+(-?[0-9.]+)", line)
+        if m:
+            return float(m.group(1))
+    raise AssertionError(f"no 'unmix r (true cube)' row in:\n{out}")
+
+
+def test_shapes_and_dtypes(exp, sim, cube):
+    bands = sim["truth"].shape[0]
+    assert sim["frame"].shape == (SIZE, SIZE)
+    assert sim["truth"].shape == (bands, SIZE, SIZE)
+    assert sim["channels"].shape == (6, SIZE, SIZE)
+    assert cube.shape == (bands, SIZE, SIZE)
+    for a in (sim["frame"], sim["truth"], sim["channels"], cube):
+        assert a.dtype == np.float32
+        assert np.isfinite(a).all()
+    assert exp.size == (SIZE, SIZE)
+    assert exp.file == "<built-in prototype>"
+
+
+def test_reconstruction_psnr_matches_run_and_cli(exp, sim, cube, tmp_path):
+    m = specmux.metrics(sim["truth"], cube)
+    r = specmux.run(exp)
+    rows = {row["stage"]: row for row in r["report"]["results"]}
+    # The same run: simulate + reconstruct here and the twin's run give the same cube.
+    assert round(m["psnr_db"], 2) == round(rows["unmix"]["psnr_db"], 2)
+    np.testing.assert_array_equal(r["cube"], cube)
+    np.testing.assert_array_equal(r["frame"], sim["frame"])
+    assert r["cube"].shape == r["truth"].shape
+    assert r["xhat"].shape == (6, SIZE, SIZE)
+    print(f"PSNR of the reconstructed cube at {SIZE}x{SIZE}: {m['psnr_db']:.2f} dB")
+    # ... and equal, to the printed 2 decimals, to what `specmux demo --size 64` prints.
+    assert f"{m['psnr_db']:.2f}" == f"{cli_psnr(tmp_path):.2f}"
+
+
+def test_full_reconstruction_and_metrics(exp, sim):
+    out = specmux.reconstruct(exp, sim["frame"].astype(np.float64), full=True)
+    assert set(out) >= {"cube", "xhat", "xgap", "unmix", "gap", "seconds"}
+    assert out["xhat"].shape == (6, SIZE, SIZE)
+    same = specmux.metrics(sim["truth"], sim["truth"])
+    assert same["exact_planes"] == sim["truth"].shape[0]
+    with pytest.raises(specmux.SpecmuxError):
+        specmux.metrics(sim["truth"], sim["truth"][:, :10, :10])
+
+
+def test_bad_toml_names_the_key():
+    with pytest.raises(specmux.SpecmuxError) as e:
+        specmux.Experiment.from_toml("[scene]\nsize = [64, 64]\nno_such_key = 3\n", "bad.toml")
+    assert "no_such_key" in str(e.value)
+    assert "bad.toml" in str(e.value)
+    with pytest.raises(specmux.SpecmuxError) as e:
+        specmux.Experiment.from_toml("[scene]\nsize = [0, 64]\n", "bad.toml")
+    assert "scene.size" in str(e.value)
+    assert issubclass(specmux.SpecmuxError, Exception)
+
+
+def test_from_file_and_dict(tmp_path):
+    p = tmp_path / "exp.toml"
+    p.write_text("[scene]\nsize = [32, 32]\n")
+    e = specmux.Experiment.from_file(str(p))
+    assert e.size == (32, 32)
+    assert e.file == str(p)
+    d = specmux.Experiment.from_dict({"scene": {"size": [32, 32]}})
+    assert d.to_dict()["scene"]["size"] == [32, 32]
+    with pytest.raises(specmux.SpecmuxError):
+        specmux.Experiment.from_file(str(tmp_path / "missing.toml"))
