@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# CI check of the Python package (issue 18, item 1): a venv under tools/.venv-python (git-ignored),
-# `pip install ./python` (maturin builds crates/python, PyO3 + numpy, in release), then the pytest
+# CI check of the Python package : a venv under tools/.venv-python (git-ignored),
+# `pip install ./python` (maturin builds crates/python, PyO3 + numpy), then the pytest
 # suite python/tests, which also runs the CLI's `specmux demo --size 64` and checks that Python's
 # simulate + reconstruct prints the same PSNR. Prints one summary line; exits non-zero on failure.
 set -euo pipefail
@@ -13,8 +13,12 @@ if [ ! -x "$venv/bin/python" ]; then
 fi
 "$venv/bin/pip" install -q --upgrade pip >/dev/null
 "$venv/bin/pip" install -q maturin pytest numpy
-# Always rebuild from this tree (the same version number would otherwise be kept).
-"$venv/bin/pip" install -q --force-reinstall --no-deps ./python
+# Always rebuild from this tree (the same version number would otherwise be kept). In CI the
+# extension is built with the dev profile into the workspace's target folder, so it reuses what
+# `cargo test` compiled (a release build of the whole stack would add ten minutes on 2 cores);
+# a user's `pip install ./python` builds in release.
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$repo/target}"
+MATURIN_PEP517_ARGS="--profile dev" "$venv/bin/pip" install -q --force-reinstall --no-deps ./python
 # The CLI the test compares with (already built by `cargo test` in .ci/run).
 cargo build -q --bin specmux
 export SPECMUX_BIN="${CARGO_TARGET_DIR:-$repo/target}/debug/specmux"
