@@ -64,12 +64,43 @@ pub fn read(path: &Path) -> Result<(Cube, Vec<String>)> {
     read_bytes(&bytes, path)
 }
 
+/// The most f32 samples (width × height × channels, over all layers) a file may declare: 1 GiB
+/// of data, 4× an 8192 × 8192 × 4 frame and 13× the prototype's 768 × 768 × 31 cube. A header
+/// that claims more is refused before anything is allocated for it.
+pub const MAX_SAMPLES: usize = 1 << 28;
+
+/// Read only the headers and refuse a file whose layers would need more than `MAX_SAMPLES`.
+fn check_declared_size(bytes: &[u8], path: &Path) -> Result<()> {
+    let err = |msg: String| Error::Exr {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+        .map_err(|e| err(e.to_string()))?;
+    let samples = meta.headers.iter().try_fold(0usize, |acc, h| {
+        let (w, h2, c) = (
+            h.layer_size.width(),
+            h.layer_size.height(),
+            h.channels.list.len(),
+        );
+        w.checked_mul(h2)?.checked_mul(c)?.checked_add(acc)
+    });
+    match samples {
+        Some(n) if n <= MAX_SAMPLES => Ok(()),
+        _ => Err(err(format!(
+            "its header declares {} samples, more than {MAX_SAMPLES} (a corrupt or foreign file?)",
+            samples.map_or("more than 2^64".into(), |n| n.to_string())
+        ))),
+    }
+}
+
 /// `read` on the bytes of an EXR file; `path` names it in errors.
 pub fn read_bytes(bytes: &[u8], path: &Path) -> Result<(Cube, Vec<String>)> {
     let err = |msg: String| Error::Exr {
         path: path.to_path_buf(),
         msg,
     };
+    check_declared_size(bytes, path)?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()
@@ -93,6 +124,18 @@ pub fn read_bytes(bytes: &[u8], path: &Path) -> Result<(Cube, Vec<String>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The file cargo-fuzz found (`fuzz/`, target exr_frame): a header declaring a layer too
+    /// large to allocate aborted the process; it is now refused by the size check.
+    #[test]
+    fn a_header_declaring_a_huge_layer_is_refused_not_allocated() {
+        let bytes = include_bytes!("../tests/fuzz-exr-oom.exr");
+        let e = read_bytes(bytes, Path::new("crash.exr"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("crash.exr") && e.contains("samples"), "{e}");
+        assert_eq!(e.lines().count(), 1);
+    }
 
     #[test]
     fn round_trip_is_bit_exact() {
