@@ -6,9 +6,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use specmux_core::spectral::Curve;
-use specmux_core::{Error, Result};
-use specmux_io::png::write_png;
-use specmux_report::plot::register_font;
+use specmux_core::Result;
+use specmux_report::plot::render_png;
 use std::path::Path;
 
 /// Canvas of the curve plots, and of the Fourier plane (its data area square: 612 × 612 px).
@@ -20,30 +19,16 @@ const LEGEND_W: u32 = 300;
 /// A drawing area of the in-memory bitmap.
 type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
 
-fn err(path: &Path) -> impl Fn(String) -> Error + '_ {
-    move |msg| Error::Image {
-        path: path.to_path_buf(),
-        msg,
-    }
-}
-
 /// Render into memory with `draw(plot area, legend area)`, then write the PNG atomically.
 fn render(
     path: &Path,
     (w, h): (u32, u32),
     draw: impl FnOnce(&Area, &Area) -> std::result::Result<(), String>,
 ) -> Result<()> {
-    register_font(path)?;
-    let mut buf = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(path)(e.to_string()))?;
+    render_png(path, (w, h), |root| {
         let (plot, legend) = root.split_horizontally(w - LEGEND_W);
-        draw(&plot, &legend).map_err(err(path))?;
-        root.present().map_err(|e| err(path)(e.to_string()))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err(path)("buffer".into()))?;
-    write_png(path, image::DynamicImage::ImageRgb8(img))
+        draw(&plot, &legend)
+    })
 }
 
 /// One legend entry per (label, style) in the legend column, from the top.

@@ -115,6 +115,32 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
 }
 
+/// A plot area on a white `w × h` canvas in memory.
+pub type Canvas<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// Render a `w × h` plot into memory with `draw` (on a white canvas, the font registered), then
+/// write it as PNG atomically; a drawing error names `path`.
+pub fn render_png(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&Canvas) -> std::result::Result<(), String>,
+) -> Result<()> {
+    register_font(path)?;
+    let err = |msg: String| Error::Image {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
+        draw(&root).map_err(err)?;
+        root.present().map_err(|e| err(e.to_string()))?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("plot buffer".into()))?;
+    write_png(path, image::DynamicImage::ImageRgb8(img))
+}
+
 /// A line plot written as PNG; rendered into memory, then written atomically.
 pub fn line_plot(
     path: &Path,
@@ -123,38 +149,33 @@ pub fn line_plot(
     y_label: &str,
     series: &[Series],
 ) -> Result<()> {
-    register_font(path)?;
-    let (w, h) = (900u32, 560u32);
-    let mut buf = vec![0u8; (w * h * 3) as usize];
-    let err = |e: String| Error::Image {
-        path: path.to_path_buf(),
-        msg: e,
-    };
     let pts = series.iter().flat_map(|s| s.points.iter());
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, y) in pts.filter(|(x, y)| x.is_finite() && y.is_finite()) {
         (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
     }
     if x0 > x1 {
-        return Err(err("nothing finite to plot".into()));
+        return Err(Error::Image {
+            path: path.to_path_buf(),
+            msg: "nothing finite to plot".into(),
+        });
     }
     let pad = 0.05 * (y1 - y0).max(1e-12);
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
+    render_png(path, (900, 560), |root| {
+        let e = |e: &dyn std::fmt::Display| e.to_string();
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 22))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(60)
             .build_cartesian_2d(x0..x1.max(x0 + 1e-9), (y0 - pad)..(y1 + pad))
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(|x| e(&x))?;
         chart
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
             .draw()
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(|x| e(&x))?;
         for s in series {
             let color = Palette99::pick(s.color).to_rgba();
             let style = ShapeStyle::from(color).stroke_width(2);
@@ -169,7 +190,7 @@ pub fn line_plot(
             } else {
                 chart.draw_series(LineSeries::new(pts, style))
             }
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(|x| e(&x))?;
             anno.label(s.label.clone())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
         }
@@ -178,11 +199,8 @@ pub fn line_plot(
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()
-            .map_err(|e| err(e.to_string()))?;
-        root.present().map_err(|e| err(e.to_string()))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("plot buffer".into()))?;
-    write_png(path, image::DynamicImage::ImageRgb8(img))
+            .map_err(|x| e(&x))
+    })
 }
 
 /// Four pixels with distinct truth spectra: the brightest, then each farthest in spectral angle
