@@ -158,8 +158,25 @@ fn emit(text: &str) {
     }
 }
 
+/// Ctrl-C (or SIGTERM) asks the running command to stop at its next safe point; a second one
+/// ends the process at once (the output sets' staging folders keep the final names clean).
+fn install_interrupt_handler() {
+    let handler = || {
+        if specmux_core::interrupt::requested() {
+            eprintln!("specmux: interrupted again; stopping now");
+            std::process::exit(130);
+        }
+        eprintln!("specmux: stopping at the next safe point (Ctrl-C again to stop now)");
+        specmux_core::interrupt::request();
+    };
+    if let Err(e) = ctrlc::set_handler(handler) {
+        eprintln!("specmux: warning: no Ctrl-C handler ({e}); Ctrl-C stops at once");
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    install_interrupt_handler();
     let lib = cli
         .spectra
         .clone()
@@ -172,7 +189,11 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             eprintln!("specmux: {e}");
-            ExitCode::FAILURE
+            if specmux_core::interrupt::requested() {
+                ExitCode::from(130)
+            } else {
+                ExitCode::FAILURE
+            }
         }
     }
 }

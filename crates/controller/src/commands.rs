@@ -2,12 +2,12 @@
 //! on the simulated (or real) devices while recording, and return the text to print or the
 //! one-line error.
 
+use crate::devices::Frame;
 use crate::error::{Error, Result};
 use crate::plan::{DeviceLimits, HostLimits, Plan};
 use crate::record::Recorder;
 use crate::run::{self, FrameRecord, Outcome, Sink};
 use crate::sim::{Fault, Faults, SimRig};
-use crate::{devices::Frame, signal};
 use serde::Serialize;
 use specmux_core::calibration::{Calibration, CalibrationFrames};
 use specmux_core::metrics;
@@ -162,7 +162,7 @@ impl Sink for Rehearsal<'_> {
     }
 
     fn stop_requested(&self) -> bool {
-        signal::requested()
+        specmux_core::interrupt::requested()
     }
 }
 
@@ -206,7 +206,6 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
         frames,
         progress,
     };
-    signal::install();
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
     sink.recorder.finish(&outcome, &sim.events())?;
     if progress {
@@ -318,7 +317,7 @@ impl Sink for Acquisition {
     }
 
     fn stop_requested(&self) -> bool {
-        signal::requested()
+        specmux_core::interrupt::requested()
     }
 }
 
@@ -353,7 +352,6 @@ fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Resul
         done: 0,
         progress,
     };
-    signal::install();
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
     sink.recorder.finish(&outcome, &sim.events())?;
     if progress {

@@ -15,7 +15,6 @@ pub mod plan;
 pub mod real;
 pub mod record;
 pub mod run;
-pub mod signal;
 pub mod sim;
 
 pub use error::{Error, Result};

@@ -49,6 +49,9 @@ pub enum Error {
         value: String,
         source: Box<Error>,
     },
+    /// The run was stopped (Ctrl-C) at a safe point; names the step it stopped in.
+    #[error("interrupted (Ctrl-C) during {0}")]
+    Interrupted(String),
 }
 
 /// Result alias for the crate.

@@ -12,6 +12,7 @@ pub mod demux;
 pub mod error;
 pub mod fft;
 pub mod gap;
+pub mod interrupt;
 pub mod metrics;
 pub mod reconstructor;
 pub mod spectral;
