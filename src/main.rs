@@ -118,6 +118,10 @@ enum Command {
         /// Side of the square test frames.
         #[arg(long, default_value_t = 256)]
         size: usize,
+        /// Also write the raw frames and an EMVA 1288 descriptor (emva1288/) for the reference
+        /// analysis (tools/emva/referee.py).
+        #[arg(long)]
+        emva: bool,
         #[arg(long, default_value = "out/ptc")]
         out: PathBuf,
     },
@@ -234,8 +238,9 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
         Command::Ptc {
             experiment,
             size,
+            emva,
             out,
-        } => commands::ptc(experiment.as_deref(), size, &out),
+        } => commands::ptc(experiment.as_deref(), size, emva, &out),
         Command::Design { what } => what.run(lib),
         Command::Reconstruct {
             frame,

@@ -434,17 +434,17 @@ pub fn timing(scene: &str, out: &Path) -> Result<String> {
     Ok(text)
 }
 
-pub fn ptc(scene: Option<&str>, size: usize, out: &Path) -> Result<String> {
+/// `specmux ptc`: the EMVA 1288 photon-transfer measurement of the experiment's camera; with
+/// `emva`, its raw frames too, as the EMVA 1288 reference code reads them (`emva1288/`).
+pub fn ptc(scene: Option<&str>, size: usize, emva: bool, out: &Path) -> Result<String> {
     let mut text = String::new();
     let cfg = match scene {
         Some(s) => experiment_for(s, None)?.rig.sensor.unwrap_or_default(),
         None => specmux_twin::sensor::SensorConfig::default(),
     };
     let sensor = specmux_twin::sensor::Sensor::new(&cfg, size, size)?;
-    let r = specmux_twin::sensor::photon_transfer(
-        &sensor,
-        &specmux_twin::sensor::default_levels(cfg.full_well_e),
-    )?;
+    let levels = specmux_twin::sensor::default_levels(cfg.full_well_e);
+    let r = specmux_twin::sensor::photon_transfer(&sensor, &levels)?;
     say!(
         text,
         "{:<22} {:>12} {:>12}",
@@ -477,7 +477,16 @@ pub fn ptc(scene: Option<&str>, size: usize, out: &Path) -> Result<String> {
     );
     let files = OutputSet::begin(out)?;
     crate::ptc::plot_ptc(&r, &files.path("ptc.png"))?;
-    specmux_io::json::write_json(&files.path("ptc.json"), &r)?;
+    let report = serde_json::json!({
+        "camera": cfg,
+        "dark_electrons_per_exposure": sensor.dark_electrons(),
+        "measured": r,
+    });
+    specmux_io::json::write_json(&files.path("ptc.json"), &report)?;
+    if emva {
+        let frames = specmux_twin::sensor::ptc_frames(&sensor, &levels, &r)?;
+        crate::ptc::write_emva_dataset(&files.path("emva1288"), &frames, cfg.bits)?;
+    }
     finish(files, out, &mut text)?;
     Ok(text)
 }

@@ -1,10 +1,58 @@
-//! The photon-transfer plot of an EMVA 1288 measurement (twin::sensor::ptc).
+//! The photon-transfer plot of an EMVA 1288 measurement (twin::sensor::ptc), and its raw
+//! frames written as an EMVA 1288 descriptor file + 16-bit PNGs for the reference code.
 
 use crate::plot::register_font;
 use plotters::prelude::*;
-use specmux_core::{Error, Result};
-use specmux_twin::sensor::PtcResult;
+use specmux_core::{Cube, Error, Result};
+use specmux_twin::sensor::{PtcFrames, PtcResult};
+use std::fmt::Write as _;
 use std::path::Path;
+
+/// Quantum efficiency written into the EMVA descriptor: the twin's photon-transfer measurement
+/// works in photo-electrons, so photons per pixel are stated as μ_e/η with this η; an outside
+/// analysis must find it back from the frames.
+pub const EMVA_DESCRIPTOR_QE: f64 = 0.5;
+
+/// Exposure time written into the descriptor (ns): one exposure, the light varied (EMVA 1288
+/// allows either series).
+const EMVA_EXPOSURE_NS: f64 = 1e6;
+
+/// Write `frames` into `dir` as the EMVA 1288 reference code reads them: `emva1288.txt` (the
+/// descriptor: `n bits width height`, `d`/`b` lines with their images) and one 16-bit PNG per
+/// frame. Pairs are the temporal data; the L-frame dark and flat sequences the spatial data.
+pub fn write_emva_dataset(dir: &Path, frames: &PtcFrames, bits: u32) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let (w, h) = (frames.pairs[0].1[0].width, frames.pairs[0].1[0].height);
+    let mut text = format!(
+        "# specmux photon-transfer frames; photons = electrons / {EMVA_DESCRIPTOR_QE} (stated QE)\n\
+         v 3.1\nn {bits} {w} {h}\n"
+    );
+    let mut series = |head: String, name: &str, images: &[Cube]| -> Result<()> {
+        text.push_str(&head);
+        for (k, img) in images.iter().enumerate() {
+            let file = format!("{name}-{k:02}.png");
+            specmux_io::png::dn_png16(&dir.join(&file), img)?;
+            let _ = writeln!(text, "i {file}");
+        }
+        Ok(())
+    };
+    for (i, (level, pair)) in frames.pairs.iter().enumerate() {
+        let head = match i {
+            0 => format!("d {EMVA_EXPOSURE_NS}\n"),
+            _ => format!("b {EMVA_EXPOSURE_NS} {}\n", level / EMVA_DESCRIPTOR_QE),
+        };
+        series(head, &format!("pair{i:02}"), pair)?;
+    }
+    series(
+        format!("d {EMVA_EXPOSURE_NS}\n"),
+        "dark-seq",
+        &frames.dark_sequence,
+    )?;
+    let (half, flats) = &frames.flat_sequence;
+    let head = format!("b {EMVA_EXPOSURE_NS} {}\n", half / EMVA_DESCRIPTOR_QE);
+    series(head, "flat-seq", flats)?;
+    specmux_io::atomic::write_bytes(&dir.join("emva1288.txt"), text.as_bytes())
+}
 
 /// Write the photon-transfer curve as a PNG: σ_y² − σ_y.dark² against μ_y − μ_y.dark (linear
 /// axes, as in EMVA 1288 data sheets), the fitted line over its range and the saturation.

@@ -20,7 +20,10 @@ mod ptc;
 mod radiometry;
 
 pub use config::{CameraConfig, SensorConfig, MAX_PRNU_FRACTION};
-pub use ptc::{default_levels, photon_transfer, PtcPoint, PtcResult, NONUNIFORMITY_FRAMES};
+pub use ptc::{
+    default_levels, photon_transfer, ptc_frames, PtcFrames, PtcPoint, PtcResult,
+    NONUNIFORMITY_FRAMES,
+};
 pub use radiometry::{photo_electrons, SpectralIrradiance};
 
 use rand::Rng;
@@ -41,6 +44,11 @@ enum Stream {
     PrnuMap = 4,
     DsnuMap = 5,
     Calibration = 6,
+}
+
+/// The noise key of flat exposure `k` at `level_e`: unrelated across levels and exposures.
+fn flat_key(level_e: f64, k: usize) -> u64 {
+    splitmix64(level_e.to_bits()) ^ k as u64
 }
 
 /// SplitMix64 finaliser: a bijective mix of 64 bits, used to derive seeds.
@@ -166,12 +174,15 @@ impl Sensor {
 
     /// Average of `n_average` frames with no light (DN): the dark frame of the calibration.
     pub fn dark_frame(&self, n_average: usize) -> Result<Cube> {
-        let zeros = vec![0f32; self.width * self.height];
-        self.average(n_average, |k| self.expose(&zeros, Stream::Dark, k as u64))
+        self.average(n_average, |k| self.dark_exposure(k))
     }
 
-    /// Average of `n_average` frames of a uniform light of `level_e` mean photo-electrons (DN).
-    /// Different levels use unrelated noise.
+    /// Dark exposure number `k` (DN): the frames [`Sensor::dark_frame`] averages.
+    pub fn dark_exposure(&self, k: usize) -> Cube {
+        let zeros = vec![0f32; self.width * self.height];
+        self.expose(&zeros, Stream::Dark, k as u64)
+    }
+
     /// The mean of `n_average` exposures of `mean_e` (one plane of electrons), drawn from the
     /// calibration stream under `key`: a calibration capture, with its own noise.
     pub fn averaged_capture(&self, mean_e: &Cube, n_average: usize, key: u64) -> Result<Cube> {
@@ -182,17 +193,29 @@ impl Sensor {
         })
     }
 
+    /// Average of `n_average` frames of a uniform light of `level_e` mean photo-electrons (DN).
+    /// Different levels use unrelated noise.
     pub fn flat_frame(&self, level_e: f64, n_average: usize) -> Result<Cube> {
+        let flat = self.uniform_light(level_e)?;
+        self.average(n_average, |k| {
+            self.expose(&flat, Stream::Flat, flat_key(level_e, k))
+        })
+    }
+
+    /// Flat exposure number `k` at `level_e` (DN): the frames [`Sensor::flat_frame`] averages.
+    pub fn flat_exposure(&self, level_e: f64, k: usize) -> Result<Cube> {
+        let flat = self.uniform_light(level_e)?;
+        Ok(self.expose(&flat, Stream::Flat, flat_key(level_e, k)))
+    }
+
+    /// A uniform light of `level_e` photo-electrons per pixel; refuses a negative or NaN level.
+    fn uniform_light(&self, level_e: f64) -> Result<Vec<f32>> {
         if !(level_e.is_finite() && level_e >= 0.0) {
             return Err(Error::Numerical(format!(
                 "flat-field level {level_e} e⁻: it must be finite and ≥ 0"
             )));
         }
-        let flat = vec![level_e as f32; self.width * self.height];
-        let level_key = splitmix64(level_e.to_bits());
-        self.average(n_average, |k| {
-            self.expose(&flat, Stream::Flat, level_key ^ k as u64)
-        })
+        Ok(vec![level_e as f32; self.width * self.height])
     }
 
     /// Pixel-wise mean of `n` frames made by `frame(k)`, summed in f64.

@@ -75,7 +75,7 @@ pub struct PtcResult {
 }
 
 /// Mean of a pair and its temporal variance var(A − B)/2, free of fixed-pattern noise.
-fn pair_statistics(a: &Cube, b: &Cube) -> (f64, f64) {
+pub(super) fn pair_statistics(a: &Cube, b: &Cube) -> (f64, f64) {
     let n = a.data.len() as f64;
     let (mut sum, mut sum_d, mut sum_d2) = (0f64, 0f64, 0f64);
     for (&x, &y) in a.data.iter().zip(&b.data) {
@@ -172,11 +172,8 @@ fn checked_levels(levels: &[f64]) -> Result<Vec<f64>> {
 /// The dark pair and one pair of flat frames per level, each reduced to its mean and temporal
 /// variance (pair i on its own noise stream, so the draws do not depend on the other levels).
 fn curve(sensor: &Sensor, levels: &[f64]) -> (PtcPoint, Vec<PtcPoint>) {
-    let pixels = sensor.width * sensor.height;
-    let pair = |index: u64, level_e: f64| {
-        let mean_e = vec![level_e as f32; pixels];
-        let a = sensor.expose(&mean_e, Stream::PhotonTransfer, 2 * index);
-        let b = sensor.expose(&mean_e, Stream::PhotonTransfer, 2 * index + 1);
+    let point = |index: usize, level_e: f64| {
+        let [a, b] = pair(sensor, index, level_e);
         let (mean_dn, variance_dn2) = pair_statistics(&a, &b);
         PtcPoint {
             level_e,
@@ -184,11 +181,50 @@ fn curve(sensor: &Sensor, levels: &[f64]) -> (PtcPoint, Vec<PtcPoint>) {
             variance_dn2,
         }
     };
-    let dark = pair(0, 0.0);
+    let dark = point(0, 0.0);
     let points = (levels.iter().enumerate())
-        .map(|(i, &level)| pair(i as u64 + 1, level))
+        .map(|(i, &level)| point(i + 1, level))
         .collect();
     (dark, points)
+}
+
+/// Pair `index` of the curve (0: the dark pair) at `level_e` mean photo-electrons (DN).
+fn pair(sensor: &Sensor, index: usize, level_e: f64) -> [Cube; 2] {
+    let mean_e = vec![level_e as f32; sensor.width * sensor.height];
+    let index = index as u64;
+    [0, 1].map(|k| sensor.expose(&mean_e, Stream::PhotonTransfer, 2 * index + k))
+}
+
+/// The raw frames of a photon-transfer measurement, for an outside analysis (the EMVA 1288
+/// reference code): the same frames [`photon_transfer`] reduces.
+pub struct PtcFrames {
+    /// (level e⁻, pair) in increasing level, the dark pair first at level 0.
+    pub pairs: Vec<(f64, [Cube; 2])>,
+    /// The dark frames [`Sensor::dark_frame`] averages for the DSNU.
+    pub dark_sequence: Vec<Cube>,
+    /// The level nearest 50 % saturation and the flat frames averaged there for the PRNU.
+    pub flat_sequence: (f64, Vec<Cube>),
+}
+
+/// The frames behind `result` (measured at `levels` on `sensor`), for an outside referee.
+pub fn ptc_frames(sensor: &Sensor, levels: &[f64], result: &PtcResult) -> Result<PtcFrames> {
+    let levels = checked_levels(levels)?;
+    let l = result.nonuniformity_frames;
+    let half = result.prnu_level_e;
+    Ok(PtcFrames {
+        pairs: std::iter::once(0.0)
+            .chain(levels)
+            .enumerate()
+            .map(|(i, level)| (level, pair(sensor, i, level)))
+            .collect(),
+        dark_sequence: (0..l).map(|k| sensor.dark_exposure(k)).collect(),
+        flat_sequence: (
+            half,
+            (0..l)
+                .map(|k| sensor.flat_exposure(half, k))
+                .collect::<Result<_>>()?,
+        ),
+    })
 }
 
 /// Saturation: the index of the variance curve's maximum, which must lie inside the series.

@@ -527,3 +527,36 @@ fn photon_transfer_refuses_a_series_that_does_not_saturate() {
     assert!(photon_transfer(&sensor, &[1.0, 2.0]).is_err());
     assert!(photon_transfer(&sensor, &[1.0, 2.0, 3.0, 4.0, f64::NAN]).is_err());
 }
+
+/// The frames handed to an outside referee are the ones the measurement reduced: each pair
+/// gives its point's mean and variance, and the dark sequence averages to the dark frame.
+#[test]
+fn ptc_frames_are_the_frames_photon_transfer_measured() {
+    let cfg = SensorConfig::default();
+    let sensor = Sensor::new(&cfg, 32, 32).unwrap();
+    let levels = default_levels(cfg.full_well_e);
+    let r = photon_transfer(&sensor, &levels).unwrap();
+    let f = ptc_frames(&sensor, &levels, &r).unwrap();
+    assert_eq!(f.pairs.len(), r.points.len() + 1);
+    assert_eq!(f.pairs[0].0, 0.0);
+    let (m, v) = ptc::pair_statistics(&f.pairs[0].1[0], &f.pairs[0].1[1]);
+    assert_eq!((m, v), (r.dark_mean_dn, r.dark_variance_dn2));
+    for ((level, [a, b]), p) in f.pairs[1..].iter().zip(&r.points) {
+        assert_eq!(*level, p.level_e);
+        assert_eq!(ptc::pair_statistics(a, b), (p.mean_dn, p.variance_dn2));
+    }
+    let l = r.nonuniformity_frames;
+    assert_eq!((f.dark_sequence.len(), f.flat_sequence.1.len()), (l, l));
+    let avg = sensor.dark_frame(l).unwrap();
+    let mean: Vec<f32> = (0..avg.data.len())
+        .map(|i| {
+            (f.dark_sequence
+                .iter()
+                .map(|c| c.data[i] as f64)
+                .sum::<f64>()
+                / l as f64) as f32
+        })
+        .collect();
+    assert_eq!(mean, avg.data);
+    assert_eq!(f.flat_sequence.0, r.prnu_level_e);
+}
