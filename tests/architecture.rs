@@ -62,7 +62,6 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         &[
             &["error"],
             &["log"],
-            &["signal"],
             &["devices"],
             &["plan"],
             &["patterns"],
@@ -80,7 +79,6 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         &[
             &["catalog"],
             &["layout"],
-            &["progress"],
             &["small"],
             &["criteria"],
             &["search"],
@@ -108,7 +106,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     (
         "report",
         &[
-            &["plot"],
+            &["plot", "progress"],
             &["bench", "sweep", "patterns", "timeline", "ptc"],
             &["commands"],
         ],

@@ -845,3 +845,38 @@ fn cli_same_seed_same_bytes_whatever_the_thread_count() {
         "EXR and PNG files byte-identical; report.json differs only in its *_seconds timings",
     );
 }
+
+#[test]
+fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
+    let d = temp("ctrl-c");
+    let out = d.join("out");
+    let values: Vec<String> = (1..=300).map(|i| i.to_string()).collect();
+    let vary = format!("reconstruct.gap.iterations={}", values.join(";"));
+    let child = Command::new(env!("CARGO_BIN_EXE_specmux"))
+        .args(["sweep", "dead-leaves", "--size", "64", "--vary", &vary])
+        .args(["--out", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted (Ctrl-C) during"), "{err}");
+    assert!(!out.exists(), "an interrupted sweep wrote its outputs");
+    let left = std::fs::read_dir(&d).unwrap().count();
+    assert_eq!(left, 0, "an interrupted sweep left a staging folder");
+    record(
+        "cli: Ctrl-C during a 300-run sweep",
+        &format!(
+            "stopped with exit 130: `{}`",
+            err.lines().last().unwrap_or("").trim()
+        ),
+    );
+}

@@ -414,7 +414,8 @@ impl Gap {
         } else {
             self.cfg.iterations
         };
-        for _ in 0..iterations {
+        for i in 0..iterations {
+            crate::interrupt::check(&format!("GAP iteration {}", i + 1))?;
             let r = self.step(&mut st);
             stats.residual_rms.push(r);
             track(&st.estimate, &mut stats);

@@ -8,7 +8,7 @@
 use crate::layout::{Guard, Layout};
 use crate::leak::{Objective, SceneSpectra};
 use crate::scenes::{self, Outcome};
-use crate::{optimise, plot, progress};
+use crate::{optimise, plot};
 use nalgebra::DMatrix;
 use serde::de::IntoDeserializer;
 use serde::{Deserialize, Serialize};
@@ -16,6 +16,7 @@ use specmux_core::demux::WindowShape;
 use specmux_core::spectral::Library;
 use specmux_core::unmix::second_difference;
 use specmux_core::{Error, Result};
+use specmux_report::progress;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::optics::dmd::DmdConfig;
 use specmux_twin::optics::fourier_filter::{FourierFilterConfig, Illumination};
@@ -185,7 +186,7 @@ fn measure(
         let rig = Rig::build(e, lib, &materials)?;
         let (sim, _) = Pipeline::build(e, &rig, &materials)?.run()?;
         out.push(SceneSpectra::measure(&scenes::label(e), &sim.channels, n)?);
-        bar.inc(1);
+        progress::step(&bar, "measuring scene spectra")?;
     }
     bar.finish_and_clear();
     let rig = Rig::build(base, lib, &materials)?;
@@ -348,7 +349,7 @@ fn simulate(
                 &experiment_for(s, &cands[i], coherent),
                 lib,
             )?);
-            bar.inc(1);
+            progress::step(&bar, "simulating carrier layouts")?;
         }
         if coherent {
             cands[i].coherent = out;

@@ -6,10 +6,11 @@
 use crate::catalog::{self, Candidate, Families};
 use crate::criteria::{Evaluator, NoiseModel, Scores, CRITERIA};
 use crate::search::{self, Ranked};
-use crate::{plot, progress, scenes};
+use crate::{plot, scenes};
 use serde::Serialize;
 use specmux_core::spectral::Library;
 use specmux_core::{Error, Result};
+use specmux_report::progress;
 use specmux_twin::optics::wheel::ColorWheel;
 use specmux_twin::scene::Materials;
 use specmux_twin::{Experiment, Rig};
@@ -321,7 +322,7 @@ fn simulate_sets(
             let mut e = e.clone();
             e.rig.wheel.filters = filters.clone();
             outcomes.push(scenes::simulate(&e, lib)?);
-            bar.inc(1);
+            progress::step(&bar, "simulating filter sets")?;
         }
         out.push(Simulated {
             label,

@@ -18,7 +18,6 @@ pub mod layout;
 pub mod leak;
 pub mod optimise;
 pub mod plot;
-pub mod progress;
 pub mod scenes;
 pub mod search;
 mod small;

@@ -218,8 +218,11 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
     let mut times = vec![Vec::with_capacity(repeats); grid.len()];
     let mut stages = vec![[(); 3].map(|_| Vec::with_capacity(repeats)); grid.len()];
     let mut outputs: Vec<Option<(Cube, Cube)>> = vec![None; grid.len()];
+    let bar = crate::progress::bar("work–precision runs");
+    bar.set_length((repeats * grid.len()) as u64);
     for _ in 0..repeats {
         for (k, r) in recons.iter().enumerate() {
+            crate::progress::step(&bar, "the work–precision runs")?;
             let out = r.run(&sim.frame, None)?;
             times[k].push(out.seconds.iter().sum());
             for (v, d) in stages[k].iter_mut().zip(out.seconds) {
@@ -228,6 +231,7 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
             outputs[k].get_or_insert((out.xgap, out.cube));
         }
     }
+    bar.finish_and_clear();
     let mut rows = Vec::with_capacity(grid.len());
     for (((s, t), st), out) in grid.iter().zip(times).zip(stages).zip(outputs) {
         let (x, cube) = out.expect("repeats ≥ 1 ran every setting");

@@ -6,6 +6,7 @@ pub mod bench;
 pub mod commands;
 pub mod patterns;
 pub mod plot;
+pub mod progress;
 pub mod ptc;
 pub mod sweep;
 pub mod timeline;

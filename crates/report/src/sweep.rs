@@ -3,6 +3,7 @@
 //! run against the truth with its wall time. A run the program refuses (a singular crosstalk
 //! matrix, say) stays in the table with its one-line reason.
 
+use crate::progress;
 use serde::Serialize;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
@@ -127,11 +128,14 @@ pub struct SweepRow {
 pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<SweepRow>> {
     let mut rows = Vec::new();
     let points = grid(vary);
-    for (n, point) in points.iter().enumerate() {
+    let bar = progress::bar("sweep");
+    bar.set_length(points.len() as u64);
+    for point in &points {
         let values: Vec<String> = point.iter().map(|(_, v)| v.to_string()).collect();
-        eprintln!("sweep {}/{}: {}", n + 1, points.len(), values.join(", "));
+        bar.set_message(values.join(", "));
         let exp = with_values(base, point)?;
         let row = match run::run(&exp, lib) {
+            Err(e @ Error::Interrupted(_)) => return Err(e),
             Ok((rep, _)) => {
                 let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));
                 let x = find("gap").or_else(|| find("demultiplex"));
@@ -166,7 +170,10 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
             },
         };
         rows.push(row);
+        let done = format!("the sweep ({} of {} runs done)", rows.len(), points.len());
+        progress::step(&bar, &done)?;
     }
+    bar.finish_and_clear();
     Ok(rows)
 }
 

@@ -114,8 +114,9 @@ struct OpticalSteps {
     sampling: PixelSamplingStage,
 }
 
-/// Runs `step` on `input`, appending its wall time to `times`.
+/// Runs `step` on `input`, appending its wall time to `times`; stops first on Ctrl-C.
 fn timed<In, Out>(times: &mut Vec<StageTime>, step: &dyn Step<In, Out>, input: &In) -> Result<Out> {
+    specmux_core::interrupt::check(&format!("the {} stage", step.name()))?;
     let t = Instant::now();
     let out = step.run(input)?;
     times.push(StageTime {
