@@ -23,7 +23,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "core",
         &[
             &["error"],
-            &["cube", "spectral"],
+            &["cube", "spectral", "interrupt"],
             &["fft"],
             &["carriers"],
             &["calibration"],
