@@ -874,9 +874,7 @@ fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
     assert_eq!(left, 0, "an interrupted sweep left a staging folder");
     record(
         "cli: Ctrl-C during a 300-run sweep",
-        &format!(
-            "stopped with exit 130: `{}`",
-            err.lines().last().unwrap_or("").trim()
-        ),
+        "stopped at the next stage or iteration with exit 130 (`specmux: interrupted (Ctrl-C) \
+         during …`); no file under the final names, no staging folder left",
     );
 }
