@@ -95,9 +95,19 @@ impl Field<'_> {
     fn render(&self, pw: u32, ph: u32) -> image::RgbImage {
         match self.reduce {
             Reduce::Smooth => {
-                resampled(&self.max_render(self.width as u32, self.height as u32))(pw, ph)
+                let native = self.max_render(self.width as u32, self.height as u32);
+                let picture = resampled(&native);
+                (picture.render)(pw, ph)
             }
             Reduce::Max => self.max_render(pw, ph),
+        }
+    }
+
+    /// The field as a picture to draw.
+    fn picture(&self) -> Picture<'_> {
+        Picture {
+            grid: (self.width as u32, self.height as u32),
+            render: Box::new(|w, h| self.render(w, h)),
         }
     }
 
@@ -122,17 +132,67 @@ impl Field<'_> {
     }
 }
 
-/// An 8-bit image resampled to `pw × ph`: antialiased (triangle filter) when it shrinks, nearest
-/// pixel when it grows, so that pixels stay sharp.
-fn resampled(img: &image::RgbImage) -> impl Fn(u32, u32) -> image::RgbImage + '_ {
-    move |pw, ph| {
-        let filter = if pw < img.width() {
-            image::imageops::FilterType::Triangle
-        } else {
-            image::imageops::FilterType::Nearest
-        };
-        image::imageops::resize(img, pw, ph, filter)
+/// An image to draw: its own pixel grid, and how it renders on a given number of screen pixels.
+pub struct Picture<'a> {
+    pub grid: (u32, u32),
+    pub render: Box<dyn Fn(u32, u32) -> image::RgbImage + 'a>,
+}
+
+/// An 8-bit image as a picture: antialiased (triangle filter) where it shrinks, nearest pixel
+/// where it grows, so that pixels stay sharp.
+fn resampled(img: &image::RgbImage) -> Picture<'_> {
+    Picture {
+        grid: img.dimensions(),
+        render: Box::new(move |pw, ph| {
+            let filter = if pw < img.width() {
+                image::imageops::FilterType::Triangle
+            } else {
+                image::imageops::FilterType::Nearest
+            };
+            image::imageops::resize(img, pw, ph, filter)
+        }),
     }
+}
+
+/// The on-screen size of an image of `grid` pixels in `room` screen pixels, the data extent's
+/// height/width being `aspect`: the largest size with that aspect, or a whole multiple of the
+/// grid (every image pixel the same number of screen pixels) where one fills 3/4 of it.
+fn screen_size(grid: (u32, u32), room: (u32, u32), aspect: f64) -> (u32, u32) {
+    let (w, h) = (room.0 as f64, room.1 as f64);
+    let (w, h) = if h >= w * aspect {
+        (w, w * aspect)
+    } else {
+        (h / aspect, h)
+    };
+    let k = (room.0 / grid.0.max(1)).min(room.1 / grid.1.max(1));
+    if k >= 1 && (k * grid.0) as f64 >= 0.75 * w {
+        (k * grid.0, k * grid.1)
+    } else {
+        (w.max(1.0) as u32, h.max(1.0) as u32)
+    }
+}
+
+/// The side, in screen pixels, that a panel gives the longer side of an `n`-pixel image
+/// (`screen_size` in 440 pixels).
+fn display_side(n: usize) -> u32 {
+    let n = n.max(1) as u32;
+    screen_size((n, n), (440, 440), 1.0).0
+}
+
+/// The height a title in a `font`-pixel font takes (a little more than plotters' `titled`).
+fn title_height(font: u32) -> u32 {
+    font * 3 / 2 + 10
+}
+
+/// The canvas size of an image panel for a `w × h` image: the image at `display_side`, its
+/// title, margins and label areas, and `extra` pixels beside it (a colour bar).
+fn panel_size((w, h): (usize, usize), extra: u32) -> (u32, u32) {
+    let m = w.max(h).max(1);
+    let side = display_side(m);
+    (
+        side * w as u32 / m as u32 + Y_LABELS + 2 * MARGIN + 4 + extra,
+        side * h as u32 / m as u32 + X_LABELS + 2 * MARGIN + 4 + title_height(TITLE),
+    )
 }
 
 /// The data extent of an image's axes (x left to right, y top to bottom) and their labels.
@@ -175,6 +235,8 @@ const MARGIN: u32 = 8;
 const X_LABELS: u32 = 42;
 const Y_LABELS: u32 = 58;
 const BAR: u32 = 84;
+/// Font size of a panel's title.
+const TITLE: u32 = 17;
 
 /// Draw the image `render` makes at the plot's pixel size on `axes` in `area` under `title`,
 /// with square data units, and number the `marks` (data coordinates) 1, 2, … in the line
@@ -182,23 +244,18 @@ const BAR: u32 = 84;
 pub fn draw_image(
     area: &Canvas,
     title: &str,
-    render: &dyn Fn(u32, u32) -> image::RgbImage,
+    picture: &Picture,
     axes: &Axes,
     marks: &[(f64, f64)],
 ) -> Draw<(Range<i32>, Range<i32>)> {
-    let area = area.titled(title, ("sans-serif", 17)).map_err(show)?;
+    let area = area.titled(title, ("sans-serif", TITLE)).map_err(show)?;
     let (aw, ah) = area.dim_in_pixel();
-    let (room_w, room_h) = (
-        aw.saturating_sub(2 * MARGIN + Y_LABELS) as f64,
-        ah.saturating_sub(2 * MARGIN + X_LABELS) as f64,
+    let room = (
+        aw.saturating_sub(2 * MARGIN + Y_LABELS),
+        ah.saturating_sub(2 * MARGIN + X_LABELS),
     );
     let aspect = (axes.y.1 - axes.y.0) / (axes.x.1 - axes.x.0);
-    let (pw, ph) = if room_h >= room_w * aspect {
-        (room_w, room_w * aspect)
-    } else {
-        (room_h / aspect, room_h)
-    };
-    let (pw, ph) = (pw.max(1.0) as u32, ph.max(1.0) as u32);
+    let (pw, ph) = screen_size(picture.grid, room, aspect);
     let area = area.shrink(
         (0, 0),
         (pw + 2 * MARGIN + Y_LABELS, ph + 2 * MARGIN + X_LABELS),
@@ -220,20 +277,23 @@ pub fn draw_image(
         .draw()
         .map_err(show)?;
     let (pw, ph) = chart.plotting_area().dim_in_pixel();
-    let bitmap =
-        BitMapElement::with_owned_buffer((axes.x.0, axes.y.0), (pw, ph), render(pw, ph).into_raw())
-            .ok_or("image buffer of the wrong size")?;
+    let bitmap = BitMapElement::with_owned_buffer(
+        (axes.x.0, axes.y.0),
+        (pw, ph),
+        (picture.render)(pw, ph).into_raw(),
+    )
+    .ok_or("image buffer of the wrong size")?;
     chart.draw_series(std::iter::once(bitmap)).map_err(show)?;
     for (k, &p) in marks.iter().enumerate() {
         let c = series_color(k);
-        let number = ("sans-serif", 17).into_font().color(&c);
+        let number = ("sans-serif", 15).into_font().color(&c);
         chart
             .draw_series(std::iter::once(
                 EmptyElement::at(p)
-                    + Circle::new((0, 0), 9, WHITE.stroke_width(5))
-                    + Circle::new((0, 0), 9, c.stroke_width(3))
-                    + Rectangle::new([(8, -26), (22, -8)], WHITE.mix(0.85).filled())
-                    + Text::new(format!("{}", k + 1), (10, -26), number),
+                    + Circle::new((0, 0), 7, WHITE.stroke_width(5))
+                    + Circle::new((0, 0), 7, c.stroke_width(3))
+                    + Rectangle::new([(6, -28), (18, -7)], WHITE.mix(0.85).filled())
+                    + Text::new(format!("{}", k + 1), (8, -24), number),
             ))
             .map_err(show)?;
     }
@@ -284,7 +344,7 @@ pub fn draw_field(
 ) -> Draw {
     let (aw, ah) = area.dim_in_pixel();
     let left = area.clone().shrink((0, 0), (aw.saturating_sub(BAR), ah));
-    let (cols, rows) = draw_image(&left, title, &|w, h| field.render(w, h), axes, marks)?;
+    let (cols, rows) = draw_image(&left, title, &field.picture(), axes, marks)?;
     let (x0, _) = area.get_base_pixel();
     let bar = area
         .clone()
@@ -340,17 +400,14 @@ pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
         "sRGB from CIE 1931 2° XYZ (D65 white) of the {}; numbers: the pixels of spectra.png",
         c.lighting
     );
+    const HEADING: u32 = 15;
+    let (pw, ph) = panel_size((w, h), 0);
+    let ch = ph + title_height(HEADING);
     let Some(truth) = c.truth else {
-        return render_png(path, (620, 640), |root| {
+        return render_png(path, (pw.max(640), ch), |root| {
             let root = root.titled(&heading, ("sans-serif", 12)).map_err(show)?;
-            draw_image(
-                &root,
-                "reconstruction (no truth given: no error map)",
-                &resampled(&est_rgb),
-                &axes,
-                &marks,
-            )
-            .map(|_| ())
+            let t = "reconstruction (no truth given: no error map)";
+            draw_image(&root, t, &resampled(&est_rgb), &axes, &marks).map(|_| ())
         });
     };
     let truth_rgb = c.colorimetry.preview(truth, c.exposure)?;
@@ -364,10 +421,12 @@ pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
         reduce: Reduce::Smooth,
         unit: format!("spectral RMSE ({})", c.unit),
     };
-    render_png(path, (1550, 530), |root| {
-        let root = root.titled(&heading, ("sans-serif", 17)).map_err(show)?;
-        let (a, rest) = root.split_horizontally(480);
-        let (b, e) = rest.split_horizontally(480);
+    render_png(path, (3 * pw + BAR, ch), |root| {
+        let root = root
+            .titled(&heading, ("sans-serif", HEADING))
+            .map_err(show)?;
+        let (a, rest) = root.split_horizontally(pw);
+        let (b, e) = rest.split_horizontally(pw);
         draw_image(&a, "truth", &resampled(&truth_rgb), &axes, &marks)?;
         draw_image(&b, "reconstruction", &resampled(&est_rgb), &axes, &marks)?;
         draw_field(&e, "per-pixel error: RMS over bands", &field, &axes, &marks)
@@ -437,17 +496,17 @@ pub fn pattern_png(
     imaged: (&[f32], usize, usize),
 ) -> Result<()> {
     let spectra = [display, imaged].map(|(v, w, h)| log_spectrum(v, w, h));
-    render_png(path, (1240, 1080), |root| {
+    let cells = [display, imaged].map(|(_, w, h)| panel_size((w, h), BAR));
+    let cell = (cells[0].0.max(cells[1].0), cells[0].1.max(cells[1].1));
+    let size = (2 * cell.0, 2 * cell.1 + title_height(20));
+    render_png(path, size, |root| {
         let root = root.titled(title, ("sans-serif", 20)).map_err(show)?;
-        let cells = root.split_evenly((2, 2));
-        for (row, ((v, w, h), (plane, unit))) in [display, imaged]
-            .into_iter()
-            .zip([
+        let (top, bottom) = root.split_vertically(cell.1);
+        for (row, (area, (v, w, h))) in [top, bottom].iter().zip([display, imaged]).enumerate() {
+            let (plane, unit) = [
                 ("displayed on the DMD", "mirror"),
                 ("imaged on the sensor", "pixel"),
-            ])
-            .enumerate()
-        {
+            ][row];
             let pattern = Field {
                 values: v,
                 width: w,
@@ -465,17 +524,12 @@ pub fn pattern_png(
                 unit: "log10(1 + |FFT|)".into(),
                 ..pattern
             };
+            let (left, right) = area.split_horizontally(cell.0);
             let pixels = Axes::pixels(w, h, &format!("{unit}s"));
+            draw_field(&left, &format!("pattern {plane}"), &pattern, &pixels, &[])?;
             let freq = Axes::frequency(w, h, unit);
-            draw_field(
-                &cells[2 * row],
-                &format!("pattern {plane}"),
-                &pattern,
-                &pixels,
-                &[],
-            )?;
             let t = "its Fourier plane (DC at the centre)";
-            draw_field(&cells[2 * row + 1], t, &spectrum, &freq, &[])?;
+            draw_field(&right, t, &spectrum, &freq, &[])?;
         }
         Ok(())
     })
@@ -577,5 +631,18 @@ mod tests {
             field(Reduce::Smooth).render(8, 8).get_pixel(5, 3).0,
             [255; 3]
         );
+    }
+
+    #[test]
+    fn images_take_whole_multiples_of_their_pixels_where_those_fill_the_room() {
+        // 128 px in 440: ×3 = 384 fills more than 3/4 of 440.
+        assert_eq!(screen_size((128, 128), (440, 500), 1.0), (384, 384));
+        // 256 px in 440: ×1 would leave 42 % empty, so the image fills the room.
+        assert_eq!(screen_size((256, 256), (440, 500), 1.0), (440, 440));
+        // Larger than the room: shrunk to fit with the data's aspect.
+        assert_eq!(screen_size((768, 384), (440, 440), 0.5), (440, 220));
+        assert_eq!(screen_size((100, 50), (450, 300), 0.5), (400, 200));
+        assert_eq!(display_side(256), 440);
+        assert_eq!(display_side(64), 384);
     }
 }
