@@ -109,6 +109,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "report",
         &[
             &["plot"],
+            &["panel"],
             &["bench", "sweep", "patterns", "timeline", "ptc"],
             &["commands"],
         ],

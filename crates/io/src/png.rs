@@ -4,12 +4,13 @@ use crate::atomic;
 use specmux_core::{Cube, Error, Result};
 use std::path::Path;
 
-/// Encode an 8-bit image as PNG (best compression, adaptive filter: plots of noisy fields stay
-/// small) and write it.
+/// Encode an 8-bit image as PNG and write it; the adaptive row filter keeps figures of noisy
+/// fields small (docs/ keeps its figures under 300 kB).
 pub fn write_png(path: &Path, img: image::DynamicImage) -> Result<()> {
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let mut bytes = Vec::new();
-    let png = PngEncoder::new_with_quality(&mut bytes, CompressionType::Best, FilterType::Adaptive);
+    let png =
+        PngEncoder::new_with_quality(&mut bytes, CompressionType::Default, FilterType::Adaptive);
     img.write_with_encoder(png).map_err(|e| Error::Image {
         path: path.to_path_buf(),
         msg: e.to_string(),
