@@ -190,8 +190,12 @@ fn panel_size((w, h): (usize, usize), extra: u32) -> (u32, u32) {
     let m = w.max(h).max(1);
     let side = display_side(m);
     (
-        side * w as u32 / m as u32 + Y_LABELS + 2 * MARGIN + 4 + extra,
-        side * h as u32 / m as u32 + X_LABELS + 2 * MARGIN + 4 + title_height(TITLE),
+        side * w as u32 / m as u32 + PANEL.y_labels + 2 * PANEL.margin + 4 + extra,
+        side * h as u32 / m as u32
+            + PANEL.x_labels
+            + 2 * PANEL.margin
+            + 4
+            + title_height(PANEL.title),
     )
 }
 
@@ -230,15 +234,26 @@ impl Axes {
     }
 }
 
-/// Panel layout in pixels: margin, x and y label areas, colour bar width with its labels.
-const MARGIN: u32 = 8;
-const X_LABELS: u32 = 42;
-const Y_LABELS: u32 = 58;
-const BAR: u32 = 84;
-/// Font size of a panel's title.
-const TITLE: u32 = 17;
+/// An image panel's layout in pixels.
+struct Layout {
+    margin: u32,
+    x_labels: u32,
+    y_labels: u32,
+    /// The colour bar with its tick labels and unit.
+    bar: u32,
+    /// The title's font size.
+    title: u32,
+}
 
-/// Draw the image `render` makes at the plot's pixel size on `axes` in `area` under `title`,
+const PANEL: Layout = Layout {
+    margin: 8,
+    x_labels: 42,
+    y_labels: 58,
+    bar: 84,
+    title: 17,
+};
+
+/// Draw `picture`, rendered at the plot's pixel size, on `axes` in `area` under `title`,
 /// with square data units, and number the `marks` (data coordinates) 1, 2, … in the line
 /// plots' series colours. Returns the image's pixel rectangle on the canvas (x, y ranges).
 pub fn draw_image(
@@ -248,22 +263,27 @@ pub fn draw_image(
     axes: &Axes,
     marks: &[(f64, f64)],
 ) -> Draw<(Range<i32>, Range<i32>)> {
-    let area = area.titled(title, ("sans-serif", TITLE)).map_err(show)?;
+    let area = area
+        .titled(title, ("sans-serif", PANEL.title))
+        .map_err(show)?;
     let (aw, ah) = area.dim_in_pixel();
     let room = (
-        aw.saturating_sub(2 * MARGIN + Y_LABELS),
-        ah.saturating_sub(2 * MARGIN + X_LABELS),
+        aw.saturating_sub(2 * PANEL.margin + PANEL.y_labels),
+        ah.saturating_sub(2 * PANEL.margin + PANEL.x_labels),
     );
     let aspect = (axes.y.1 - axes.y.0) / (axes.x.1 - axes.x.0);
     let (pw, ph) = screen_size(picture.grid, room, aspect);
     let area = area.shrink(
         (0, 0),
-        (pw + 2 * MARGIN + Y_LABELS, ph + 2 * MARGIN + X_LABELS),
+        (
+            pw + 2 * PANEL.margin + PANEL.y_labels,
+            ph + 2 * PANEL.margin + PANEL.x_labels,
+        ),
     );
     let mut chart = ChartBuilder::on(&area)
-        .margin(MARGIN)
-        .x_label_area_size(X_LABELS)
-        .y_label_area_size(Y_LABELS)
+        .margin(PANEL.margin)
+        .x_label_area_size(PANEL.x_labels)
+        .y_label_area_size(PANEL.y_labels)
         .build_cartesian_2d(axes.x.0..axes.x.1, axes.y.1..axes.y.0)
         .map_err(show)?;
     chart
@@ -310,7 +330,7 @@ fn draw_colorbar(area: &Canvas, field: &Field, rows: &Range<i32>) -> Draw {
         .margin_top((rows.start - top).max(0) as u32)
         .margin_bottom((top + ah as i32 - rows.end).max(0) as u32)
         .margin_left(6)
-        .right_y_label_area_size(BAR - 24)
+        .right_y_label_area_size(PANEL.bar - 24)
         .build_cartesian_2d(0.0..1.0, lo..hi)
         .map_err(show)?;
     chart
@@ -343,12 +363,14 @@ pub fn draw_field(
     marks: &[(f64, f64)],
 ) -> Draw {
     let (aw, ah) = area.dim_in_pixel();
-    let left = area.clone().shrink((0, 0), (aw.saturating_sub(BAR), ah));
+    let left = area
+        .clone()
+        .shrink((0, 0), (aw.saturating_sub(PANEL.bar), ah));
     let (cols, rows) = draw_image(&left, title, &field.picture(), axes, marks)?;
     let (x0, _) = area.get_base_pixel();
     let bar = area
         .clone()
-        .shrink(((cols.end - x0).max(0) as u32, 0), (BAR, ah));
+        .shrink(((cols.end - x0).max(0) as u32, 0), (PANEL.bar, ah));
     draw_colorbar(&bar, field, &rows)
 }
 
@@ -380,7 +402,7 @@ pub struct Comparison<'a> {
     pub exposure: f64,
     /// How the colours were made, e.g. "reflectance under illuminants/D65".
     pub lighting: String,
-    /// The cube's quantity and unit, e.g. "reflectance" or "radiance, arb. units".
+    /// The cube's quantity and unit, e.g. "reflectance" or "radiance, scene units".
     pub unit: String,
     pub pixels: &'a [(usize, usize)],
 }
@@ -421,7 +443,7 @@ pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
         reduce: Reduce::Smooth,
         unit: format!("spectral RMSE ({})", c.unit),
     };
-    render_png(path, (3 * pw + BAR, ch), |root| {
+    render_png(path, (3 * pw + PANEL.bar, ch), |root| {
         let root = root
             .titled(&heading, ("sans-serif", HEADING))
             .map_err(show)?;
@@ -496,7 +518,7 @@ pub fn pattern_png(
     imaged: (&[f32], usize, usize),
 ) -> Result<()> {
     let spectra = [display, imaged].map(|(v, w, h)| log_spectrum(v, w, h));
-    let cells = [display, imaged].map(|(_, w, h)| panel_size((w, h), BAR));
+    let cells = [display, imaged].map(|(_, w, h)| panel_size((w, h), PANEL.bar));
     let cell = (cells[0].0.max(cells[1].0), cells[0].1.max(cells[1].1));
     let size = (2 * cell.0, 2 * cell.1 + title_height(20));
     render_png(path, size, |root| {
