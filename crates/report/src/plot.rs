@@ -378,8 +378,9 @@ pub fn keyed_line_plot(
     })
 }
 
-/// Four pixels with distinct truth spectra: the brightest, then each farthest in spectral angle
-/// from those already chosen (searched on a coarse grid).
+/// `count` pixels of `truth` (or of a reconstruction where there is none) with distinct
+/// spectra: the brightest, then each farthest in spectral angle from those already chosen
+/// (searched on a coarse grid).
 pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
     let step = (truth.width.min(truth.height) / 48).max(1);
     let cands: Vec<(usize, usize, Vec<f32>)> = (step / 2..truth.height)
