@@ -107,6 +107,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "report",
         &[
             &["plot", "progress"],
+            &["panel"],
             &["bench", "sweep", "patterns", "timeline", "ptc"],
             &["commands"],
         ],

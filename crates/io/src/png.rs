@@ -5,14 +5,14 @@ use crate::atomic;
 use specmux_core::{Cube, Error, Result};
 use std::path::Path;
 
-/// Encode an 8-bit image as PNG and write it.
+/// Encode an 8-bit image as PNG and write it; the adaptive row filter keeps figures of noisy
+/// fields small (docs/ keeps its figures under 300 kB).
 pub fn write_png(path: &Path, img: image::DynamicImage) -> Result<()> {
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let mut bytes = Vec::new();
-    img.write_to(
-        &mut std::io::Cursor::new(&mut bytes),
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| Error::Image {
+    let png =
+        PngEncoder::new_with_quality(&mut bytes, CompressionType::Default, FilterType::Adaptive);
+    img.write_with_encoder(png).map_err(|e| Error::Image {
         path: path.to_path_buf(),
         msg: e.to_string(),
     })?;

@@ -1,6 +1,5 @@
 //! One function per CLI command: run the library, write the files, return the text to print.
 
-use crate::plot::Colorimetry;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::{Grid, Library};
 use specmux_core::unmix::UnmixStats;
@@ -167,23 +166,7 @@ fn write_run_files(
     exr_io::write(&files.path("cube.exr"), &d.cube, &band_names(&grid))?;
     let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
     exr_io::write(&files.path("channels.exr"), &d.xhat, &ch)?;
-    let light = match exp.scene.quantity {
-        specmux_twin::scene::Quantity::Reflectance => Some(lib.curve(&exp.scene.illuminant)?),
-        specmux_twin::scene::Quantity::Radiance => None,
-    };
-    let col = Colorimetry::new(lib, &grid, light.as_ref())?;
-    let exposure = if light.is_some() {
-        1.0
-    } else {
-        1.0 / f64::from(d.truth.max().max(f32::MIN_POSITIVE))
-    };
-    for (name, cube) in [("truth_rgb.png", &d.truth), ("cube_rgb.png", &d.cube)] {
-        specmux_io::png::write_png(
-            &files.path(name),
-            image::DynamicImage::ImageRgb8(col.preview(cube, exposure)?),
-        )?;
-    }
-    crate::plot::spectra_plot(&files.path("spectra.png"), &grid, &d.truth, &d.cube)?;
+    crate::panel::write_figures(exp, lib, Some(&d.truth), &d.cube, files)?;
     specmux_io::json::write_json(&files.path("report.json"), rep)
 }
 
@@ -388,7 +371,7 @@ pub fn patterns(
         say!(text, "{}", row.join(" "));
     }
     let files = OutputSet::begin(out)?;
-    pr::write_pattern_pngs(&set, files.dir())?;
+    pr::write_pattern_pngs(&set, &rig.carriers, files.dir())?;
     specmux_io::json::write_json(&files.path("patterns.json"), &rep)?;
     finish(files, out, &mut text)?;
     Ok(text)
@@ -552,8 +535,8 @@ pub fn reconstruct(
     );
     let files = OutputSet::begin(out)?;
     exr_io::write(&files.path("cube.exr"), &cube, &band_names(&grid))?;
-    if let Some((tp, tc)) = truth {
-        let m = specmux_core::metrics::compare(&tc, &cube)?;
+    if let Some((tp, tc)) = &truth {
+        let m = specmux_core::metrics::compare(tc, &cube)?;
         say!(
             text,
             "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {}°",
@@ -568,6 +551,7 @@ pub fn reconstruct(
         }
         specmux_io::json::write_json(&files.path("metrics.json"), &m)?;
     }
+    crate::panel::write_figures(&exp, lib, truth.as_ref().map(|t| &t.1), &cube, &files)?;
     finish(files, out, &mut text)?;
     Ok(text)
 }

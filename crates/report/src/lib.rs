@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod commands;
+pub mod panel;
 pub mod patterns;
 pub mod plot;
 pub mod progress;

@@ -171,61 +171,20 @@ pub fn pattern_report(
     ))
 }
 
-/// Grey PNG of `v` (`w × h`) scaled from its minimum to its maximum, written atomically.
-fn write_png(path: &Path, v: &[f32], w: usize, h: usize) -> Result<()> {
-    use image::ImageEncoder;
-    let (lo, hi) = v
-        .iter()
-        .fold((f32::MAX, f32::MIN), |(a, b), &x| (a.min(x), b.max(x)));
-    let span = if hi > lo { hi - lo } else { 1.0 };
-    let px: Vec<u8> = v
-        .iter()
-        .map(|&x| (255.0 * (x - lo) / span).round() as u8)
-        .collect();
-    let mut bytes = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut bytes)
-        .write_image(&px, w as u32, h as u32, image::ExtendedColorType::L8)
-        .map_err(|e| Error::Image {
-            path: path.to_path_buf(),
-            msg: e.to_string(),
-        })?;
-    specmux_io::atomic::write_bytes(path, &bytes)
-}
-
-/// log(1 + |FFT|), DC at the centre.
-fn log_spectrum(v: &[f32], w: usize, h: usize) -> Vec<f32> {
-    let spec = Fft2::new(w, h).forward(v);
-    let mut out = vec![0.0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
-            let (kx, ky) = (x as i64 - (w / 2) as i64, y as i64 - (h / 2) as i64);
-            out[y * w + x] = spec.at(kx, ky).norm().ln_1p();
-        }
-    }
-    out
-}
-
-/// pattern_{i}_display.png, pattern_{i}_display_spectrum.png, pattern_{i}_imaged.png and
-/// pattern_{i}_imaged_spectrum.png for every channel.
-pub fn write_pattern_pngs(set: &PatternSet, dir: &Path) -> Result<()> {
+/// pattern_{i}.png for every channel: the displayed and the imaged pattern with their Fourier
+/// planes, on axes, with colour bars (`panel::pattern_png`).
+pub fn write_pattern_pngs(set: &PatternSet, carriers: &[Carrier], dir: &Path) -> Result<()> {
     let (dw, dh) = (set.display.width, set.display.height);
     let (w, h) = (set.imaged.width, set.imaged.height);
-    for i in 0..set.imaged.planes {
-        let d = set.display.plane(i);
-        let s = set.imaged.plane(i);
-        write_png(&dir.join(format!("pattern_{i}_display.png")), d, dw, dh)?;
-        write_png(
-            &dir.join(format!("pattern_{i}_display_spectrum.png")),
-            &log_spectrum(d, dw, dh),
-            dw,
-            dh,
-        )?;
-        write_png(&dir.join(format!("pattern_{i}_imaged.png")), s, w, h)?;
-        write_png(
-            &dir.join(format!("pattern_{i}_imaged_spectrum.png")),
-            &log_spectrum(s, w, h),
-            w,
-            h,
+    for (i, c) in carriers.iter().enumerate().take(set.imaged.planes) {
+        crate::panel::pattern_png(
+            &dir.join(format!("pattern_{i}.png")),
+            &format!(
+                "Pattern {i}: carrier ({:.4}, {:.4}) cycles/pixel on the sensor",
+                c.fx, c.fy
+            ),
+            (set.display.plane(i), dw, dh),
+            (set.imaged.plane(i), w, h),
         )?;
     }
     Ok(())
@@ -408,9 +367,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("specmux-patterns-{}", std::process::id()));
         let (_, set) =
             pattern_report(&small_rig(), &default_layout()[..2], &line(2), 64, 64, 0.25).unwrap();
-        write_pattern_pngs(&set, &dir).unwrap();
-        let img = image::open(dir.join("pattern_1_display.png")).unwrap();
-        assert_eq!((img.width(), img.height()), (128, 128));
+        write_pattern_pngs(&set, &default_layout()[..2], &dir).unwrap();
+        let img = image::open(dir.join("pattern_1.png")).unwrap();
+        // Four panels with axes and colour bars, each wider than the 128-mirror pattern.
+        assert!(img.width() > 4 * 128 && img.height() > 2 * 128, "{img:?}");
+        assert!(!dir.join("pattern_2.png").exists());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

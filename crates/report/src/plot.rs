@@ -1,5 +1,6 @@
 //! Plots: PNG previews of cubes (CIE 1931 → sRGB), line plots, and spectra against the truth.
 
+use plotters::element::MultiLineText;
 use plotters::prelude::*;
 use specmux_core::spectral::{Curve, Grid, Library};
 use specmux_core::{Cube, Error, Result};
@@ -42,6 +43,17 @@ impl Colorimetry {
         Ok(Colorimetry { xyz })
     }
 
+    /// CIE XYZ of one spectrum (white reflector or the brightest radiance at exposure 1: Y = 1).
+    fn xyz(&self, spectrum: impl Iterator<Item = f64>) -> [f64; 3] {
+        let mut c = [0.0f64; 3];
+        for (v, w) in spectrum.zip(&self.xyz) {
+            for k in 0..3 {
+                c[k] += v * w[k];
+            }
+        }
+        c
+    }
+
     /// An sRGB preview; `exposure` scales Y before the tone curve (1 = white reflector at 1).
     pub fn preview(&self, cube: &Cube, exposure: f64) -> Result<image::RgbImage> {
         if cube.planes != self.xyz.len() {
@@ -51,34 +63,33 @@ impl Colorimetry {
                 self.xyz.len()
             )));
         }
+        let n = cube.pixels();
         let mut img = image::RgbImage::new(cube.width as u32, cube.height as u32);
         for (p, px) in img.pixels_mut().enumerate() {
-            let mut c = [0.0f64; 3];
-            for (b, w) in self.xyz.iter().enumerate() {
-                let v = cube.plane(b)[p] as f64;
-                for k in 0..3 {
-                    c[k] += v * w[k];
-                }
-            }
-            let [x, y, z] = c.map(|v| v * exposure);
-            // XYZ (D65 white) → linear sRGB (IEC 61966-2-1), then the sRGB transfer curve.
-            let lin = [
-                3.2406 * x - 1.5372 * y - 0.4986 * z,
-                -0.9689 * x + 1.8758 * y + 0.0415 * z,
-                0.0557 * x - 0.2040 * y + 1.0570 * z,
-            ];
-            *px = image::Rgb(lin.map(|v| {
-                let v = v.clamp(0.0, 1.0);
-                let g = if v <= 0.003_130_8 {
-                    12.92 * v
-                } else {
-                    1.055 * v.powf(1.0 / 2.4) - 0.055
-                };
-                (g * 255.0).round() as u8
-            }));
+            let c = self.xyz((0..cube.planes).map(|b| cube.data[b * n + p] as f64));
+            *px = image::Rgb(xyz_to_srgb(c.map(|v| v * exposure)));
         }
         Ok(img)
     }
+}
+
+/// XYZ (D65 white, Y = 1 white) → 8-bit sRGB (IEC 61966-2-1): the linear matrix, a clip to the
+/// gamut, then the sRGB transfer curve.
+pub fn xyz_to_srgb([x, y, z]: [f64; 3]) -> [u8; 3] {
+    let lin = [
+        3.2406 * x - 1.5372 * y - 0.4986 * z,
+        -0.9689 * x + 1.8758 * y + 0.0415 * z,
+        0.0557 * x - 0.2040 * y + 1.0570 * z,
+    ];
+    lin.map(|v| {
+        let v = v.clamp(0.0, 1.0);
+        let g = if v <= 0.003_130_8 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        (g * 255.0).round() as u8
+    })
 }
 
 /// Register the embedded DejaVu Sans as plotters' "sans-serif" once (no system fonts); the
@@ -107,12 +118,46 @@ pub fn register_font(path: &Path) -> Result<()> {
     }
 }
 
-/// A line series for a plot: label, colour index and (x, y) points.
+/// A line series for a plot: label (empty: no legend entry), colour index, line style and
+/// (x, y) points.
 pub struct Series {
     pub label: String,
     pub color: usize,
     pub dashed: bool,
     pub points: Vec<(f64, f64)>,
+}
+
+/// Series colours: the ten of Tableau (matplotlib's default cycle), distinct on white and on
+/// images.
+const SERIES_COLORS: [(u8, u8, u8); 10] = [
+    (0x1f, 0x77, 0xb4),
+    (0xff, 0x7f, 0x0e),
+    (0x2c, 0xa0, 0x2c),
+    (0xd6, 0x27, 0x28),
+    (0x94, 0x67, 0xbd),
+    (0x8c, 0x56, 0x4b),
+    (0xe3, 0x77, 0xc2),
+    (0x7f, 0x7f, 0x7f),
+    (0xbc, 0xbd, 0x22),
+    (0x17, 0xbe, 0xcf),
+];
+
+/// The colour of series colour index `k`, shared by line plots and the pixel marks on images.
+pub fn series_color(k: usize) -> RGBColor {
+    let (r, g, b) = SERIES_COLORS[k % SERIES_COLORS.len()];
+    RGBColor(r, g, b)
+}
+
+/// A tick label for `v` on an axis spanning `span`: as many decimals as a tenth of the span
+/// needs (400 on a 300 nm axis, 0.3 on a unit axis), never "-0".
+pub fn tick_label(v: f64, span: f64) -> String {
+    let step = (span.abs() / 10.0).max(f64::MIN_POSITIVE);
+    let decimals = (-step.log10().floor()).clamp(0.0, 9.0) as usize;
+    let s = format!("{v:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => s,
+    }
 }
 
 /// A plot area on a white `w × h` canvas in memory.
@@ -141,6 +186,76 @@ pub fn render_png(
     write_png(path, image::DynamicImage::ImageRgb8(img))
 }
 
+/// A drawing error as the text `render_png` reports.
+pub fn show(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+/// Does the segment a–b meet the axis-aligned box [lo, hi]? (Liang–Barsky clipping.)
+fn segment_meets_box(a: (f64, f64), b: (f64, f64), lo: (f64, f64), hi: (f64, f64)) -> bool {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [
+        (-dx, a.0 - lo.0),
+        (dx, hi.0 - a.0),
+        (-dy, a.1 - lo.1),
+        (dy, hi.1 - a.1),
+    ] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return false;
+            }
+        } else if p < 0.0 {
+            t0 = t0.max(q / p);
+        } else {
+            t1 = t1.min(q / p);
+        }
+    }
+    t0 <= t1
+}
+
+/// Where the legend goes: the first plot corner whose box (`frac` of the plot's width and
+/// height) no curve crosses, in the order upper right, upper left, lower right, lower left; if
+/// every corner is taken, the upper right with the y range raised until the curves stay below
+/// the box. Returns the corner and the top of the y range.
+pub fn place_legend(
+    curves: &[Vec<(f64, f64)>],
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+    frac: (f64, f64),
+) -> (SeriesLabelPosition, f64) {
+    use SeriesLabelPosition::*;
+    let (fw, fh) = (frac.0.clamp(0.0, 1.0), frac.1.clamp(0.0, 0.9));
+    let norm = |&(x, y): &(f64, f64)| ((x - x0) / (x1 - x0), (y - y0) / (y1 - y0));
+    let free = |lo: (f64, f64), hi: (f64, f64)| {
+        !curves.iter().any(|c| {
+            let pts: Vec<(f64, f64)> = c.iter().map(norm).collect();
+            pts.windows(2)
+                .any(|s| segment_meets_box(s[0], s[1], lo, hi))
+                || (pts.len() == 1 && segment_meets_box(pts[0], pts[0], lo, hi))
+        })
+    };
+    for (pos, (u, v)) in [
+        (UpperRight, (1.0 - fw, 1.0 - fh)),
+        (UpperLeft, (0.0, 1.0 - fh)),
+        (LowerRight, (1.0 - fw, 0.0)),
+        (LowerLeft, (0.0, 0.0)),
+    ] {
+        if free((u, v), (u + fw, v + fh)) {
+            return (pos, y1);
+        }
+    }
+    // The data keep the lower 1 − fh of the new range, y1' − y0 = (y1 − y0) / (1 − fh), and a
+    // gap of 2 % of the old range below the box.
+    (UpperRight, y0 + (y1 - y0) * (1.0 / (1.0 - fh) + 0.02))
+}
+
+/// Margin, x and y label-area sizes and fonts of the line plots, in pixels.
+const MARGIN: u32 = 12;
+const X_LABELS: u32 = 45;
+const Y_LABELS: u32 = 70;
+const LEGEND_FONT: u32 = 15;
+
 /// A line plot written as PNG; rendered into memory, then written atomically.
 pub fn line_plot(
     path: &Path,
@@ -149,9 +264,27 @@ pub fn line_plot(
     y_label: &str,
     series: &[Series],
 ) -> Result<()> {
-    let pts = series.iter().flat_map(|s| s.points.iter());
+    keyed_line_plot(path, title, (x_label, y_label), series, &[])
+}
+
+/// A line plot whose legend also holds `key`: black legend-only entries (label, dashed) that
+/// say what a line style means. The legend goes where it covers no curve (`place_legend`).
+pub fn keyed_line_plot(
+    path: &Path,
+    title: &str,
+    (x_label, y_label): (&str, &str),
+    series: &[Series],
+    key: &[(&str, bool)],
+) -> Result<()> {
+    let curves: Vec<Vec<(f64, f64)>> = series
+        .iter()
+        .map(|s| {
+            let fin = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+            s.points.iter().filter(fin).cloned().collect()
+        })
+        .collect();
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for &(x, y) in pts.filter(|(x, y)| x.is_finite() && y.is_finite()) {
+    for &(x, y) in curves.iter().flatten() {
         (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
     }
     if x0 > x1 {
@@ -160,51 +293,94 @@ pub fn line_plot(
             msg: "nothing finite to plot".into(),
         });
     }
+    let x1 = x1.max(x0 + 1e-9);
     let pad = 0.05 * (y1 - y0).max(1e-12);
+    let (y0, y1) = (y0 - pad, y1 + pad);
+    let entries: Vec<(String, RGBColor, bool)> = series
+        .iter()
+        .filter(|s| !s.label.is_empty())
+        .map(|s| (s.label.clone(), series_color(s.color), s.dashed))
+        .chain(key.iter().map(|&(l, d)| (l.to_string(), BLACK, d)))
+        .collect();
     render_png(path, (900, 560), |root| {
-        let e = |e: &dyn std::fmt::Display| e.to_string();
-        let mut chart = ChartBuilder::on(root)
-            .caption(title, ("sans-serif", 22))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x0..x1.max(x0 + 1e-9), (y0 - pad)..(y1 + pad))
-            .map_err(|x| e(&x))?;
+        let area = root.titled(title, ("sans-serif", 22)).map_err(show)?;
+        let (aw, ah) = area.dim_in_pixel();
+        let plot = (
+            aw.saturating_sub(2 * MARGIN + Y_LABELS).max(1) as f64,
+            ah.saturating_sub(2 * MARGIN + X_LABELS).max(1) as f64,
+        );
+        let font = ("sans-serif", LEGEND_FONT).into_font();
+        let mut text = MultiLineText::<_, &str>::new((0, 0), font.clone());
+        entries.iter().for_each(|e| text.push_line(e.0.as_str()));
+        let (lw, lh) = text.estimate_dimension().map_err(show)?;
+        // The legend box: text, 30 px for the line sample, 10 px margins, 5 px from the edge.
+        let frac = (
+            (lw + 30 + 20 + 10) as f64 / plot.0,
+            (lh + 20 + 10) as f64 / plot.1,
+        );
+        let (pos, top) = if entries.is_empty() {
+            (SeriesLabelPosition::UpperRight, y1)
+        } else {
+            place_legend(&curves, (x0, x1), (y0, y1), frac)
+        };
+        let mut chart = ChartBuilder::on(&area)
+            .margin(MARGIN)
+            .x_label_area_size(X_LABELS)
+            .y_label_area_size(Y_LABELS)
+            .build_cartesian_2d(x0..x1, y0..top)
+            .map_err(show)?;
         chart
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .x_label_formatter(&|v| tick_label(*v, x1 - x0))
+            .y_label_formatter(&|v| tick_label(*v, top - y0))
+            .label_style(("sans-serif", 15))
             .draw()
-            .map_err(|x| e(&x))?;
-        for s in series {
-            let color = Palette99::pick(s.color).to_rgba();
-            let style = ShapeStyle::from(color).stroke_width(2);
-            let pts: Vec<(f64, f64)> = s
-                .points
-                .iter()
-                .cloned()
-                .filter(|(x, y)| x.is_finite() && y.is_finite())
-                .collect();
-            let anno = if s.dashed {
-                chart.draw_series(DashedLineSeries::new(pts, 6, 4, style))
+            .map_err(show)?;
+        for (s, pts) in series.iter().zip(curves) {
+            let style = ShapeStyle::from(series_color(s.color)).stroke_width(2);
+            if s.dashed {
+                chart.draw_series(DashedLineSeries::new(pts, 8, 5, style))
             } else {
                 chart.draw_series(LineSeries::new(pts, style))
             }
-            .map_err(|x| e(&x))?;
-            anno.label(s.label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+            .map_err(show)?;
+        }
+        for (label, color, dashed) in entries.iter().cloned() {
+            let style = ShapeStyle::from(color).stroke_width(2);
+            chart
+                .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())
+                .map_err(show)?
+                .label(label)
+                .legend(move |(x, y)| {
+                    // A 20-pixel sample: three dashes, or three touching strokes.
+                    let d = if dashed {
+                        [(0, 5), (8, 13), (16, 20)]
+                    } else {
+                        [(0, 7), (7, 14), (14, 20)]
+                    };
+                    let seg = |(a, b)| PathElement::new(vec![(a, 0), (b, 0)], style);
+                    EmptyElement::at((x, y)) + seg(d[0]) + seg(d[1]) + seg(d[2])
+                });
+        }
+        if entries.is_empty() {
+            return Ok(());
         }
         chart
             .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
+            .position(pos)
+            .label_font(font.clone())
+            .background_style(WHITE.mix(0.9))
             .border_style(BLACK)
             .draw()
-            .map_err(|x| e(&x))
+            .map_err(show)
     })
 }
 
-/// Four pixels with distinct truth spectra: the brightest, then each farthest in spectral angle
-/// from those already chosen (searched on a coarse grid).
+/// `count` pixels of `truth` (or of a reconstruction where there is none) with distinct
+/// spectra: the brightest, then each farthest in spectral angle from those already chosen
+/// (searched on a coarse grid).
 pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
     let step = (truth.width.min(truth.height) / 48).max(1);
     let cands: Vec<(usize, usize, Vec<f32>)> = (step / 2..truth.height)
@@ -244,29 +420,139 @@ pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
     chosen.iter().map(|c| (c.0, c.1)).collect()
 }
 
-/// Truth (solid) against reconstruction (dashed) at four spectrally distinct pixels.
-pub fn spectra_plot(path: &Path, grid: &Grid, truth: &Cube, est: &Cube) -> Result<()> {
+/// Truth (solid) against reconstruction (dashed) at `pixels`, one colour per pixel (the colours
+/// of the marks on the comparison panel); without a truth, the reconstruction alone.
+pub fn spectra_plot(
+    path: &Path,
+    grid: &Grid,
+    (truth, est): (Option<&Cube>, &Cube),
+    pixels: &[(usize, usize)],
+    y_label: &str,
+) -> Result<()> {
     let wl = grid.wavelengths();
+    let curve = |cube: &Cube, (x, y): (usize, usize)| -> Vec<(f64, f64)> {
+        wl.iter()
+            .zip(cube.spectrum(x, y))
+            .map(|(&l, v)| (l, v as f64))
+            .collect()
+    };
     let mut series = Vec::new();
-    for (k, (x, y)) in distinct_pixels(truth, 4).into_iter().enumerate() {
-        for (cube, dashed, tag) in [(truth, false, "truth"), (est, true, "recon")] {
+    for (k, &(x, y)) in pixels.iter().enumerate() {
+        let label = format!("{} ({x}, {y})", k + 1);
+        if let Some(t) = truth {
             series.push(Series {
-                label: format!("({x},{y}) {tag}"),
+                label: label.clone(),
                 color: k,
-                dashed,
-                points: wl
-                    .iter()
-                    .zip(cube.spectrum(x, y))
-                    .map(|(&l, v)| (l, v as f64))
-                    .collect(),
+                dashed: false,
+                points: curve(t, (x, y)),
             });
         }
+        series.push(Series {
+            label: if truth.is_some() {
+                String::new()
+            } else {
+                label
+            },
+            color: k,
+            dashed: truth.is_some(),
+            points: curve(est, (x, y)),
+        });
     }
-    line_plot(
-        path,
-        "Spectra: truth (solid) and reconstruction (dashed)",
-        "wavelength (nm)",
-        "value",
-        &series,
-    )
+    let (title, key): (&str, &[(&str, bool)]) = if truth.is_some() {
+        (
+            "Spectra at the marked pixels: truth and reconstruction",
+            &[("truth", false), ("reconstruction", true)],
+        )
+    } else {
+        (
+            "Reconstructed spectra at the marked pixels (no truth given)",
+            &[],
+        )
+    };
+    keyed_line_plot(path, title, ("wavelength (nm)", y_label), &series, key)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn library() -> Library {
+        Library::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../spectra"))
+    }
+
+    /// The sRGB colour of one reflectance spectrum on 400–700 nm (10 nm) under D65.
+    fn colour_of(reflectance: impl Fn(f64) -> f32) -> [u8; 3] {
+        let lib = library();
+        let grid = Grid::new(400.0, 10.0, 31).unwrap();
+        let d65 = lib.curve("illuminants/D65").unwrap();
+        let col = Colorimetry::new(&lib, &grid, Some(&d65)).unwrap();
+        let mut cube = Cube::zeros(1, 1, grid.count);
+        cube.data = grid.wavelengths().into_iter().map(reflectance).collect();
+        col.preview(&cube, 1.0).unwrap().get_pixel(0, 0).0
+    }
+
+    #[test]
+    fn a_flat_reflectance_under_d65_is_neutral_grey() {
+        // Y = 0.5 → sRGB 0.5^(1/2.4)·1.055 − 0.055 = 0.7354 → 187.5.
+        let [r, g, b] = colour_of(|_| 0.5);
+        for c in [r, g, b] {
+            assert!((187..=189).contains(&c), "{:?}", [r, g, b]);
+        }
+        assert!(r.abs_diff(g) <= 1 && g.abs_diff(b) <= 1, "{:?}", [r, g, b]);
+        assert_eq!(colour_of(|_| 1.0), [255; 3]);
+        assert_eq!(colour_of(|_| 0.0), [0; 3]);
+    }
+
+    #[test]
+    fn narrow_bands_take_their_hue() {
+        let band = |c: f64| move |wl: f64| if (wl - c).abs() < 25.0 { 1.0 } else { 0.0 };
+        let [r, g, b] = colour_of(band(620.0));
+        assert!(r > 2 * g.max(b), "620 nm: {:?}", [r, g, b]);
+        let [r, g, b] = colour_of(band(450.0));
+        assert!(b > 2 * r.max(g), "450 nm: {:?}", [r, g, b]);
+        let [r, g, b] = colour_of(band(530.0));
+        assert!(g > r.max(b), "530 nm: {:?}", [r, g, b]);
+    }
+
+    #[test]
+    fn tick_labels_take_the_decimals_the_axis_needs() {
+        assert_eq!(tick_label(400.0, 300.0), "400");
+        assert_eq!(tick_label(0.30000000000000004, 1.0), "0.3");
+        assert_eq!(tick_label(0.005, 0.03), "0.005");
+        assert_eq!(tick_label(-1e-9, 1.0), "0.0");
+        assert_eq!(tick_label(-0.25, 1.0), "-0.2");
+        assert_eq!(tick_label(1250.0, 4000.0), "1250");
+    }
+
+    #[test]
+    fn a_segment_through_a_box_meets_it_without_a_vertex_inside() {
+        let (lo, hi) = ((0.8, 0.8), (1.0, 1.0));
+        assert!(segment_meets_box((0.7, 1.0), (1.0, 0.7), lo, hi));
+        assert!(!segment_meets_box((0.5, 1.0), (1.0, 0.5), lo, hi));
+        assert!(!segment_meets_box((0.0, 0.9), (0.7, 0.9), lo, hi));
+        assert!(segment_meets_box((0.9, 0.9), (0.9, 0.9), lo, hi));
+    }
+
+    #[test]
+    fn the_legend_takes_a_free_corner_or_headroom() {
+        use SeriesLabelPosition::*;
+        let unit = (0.0, 1.0);
+        let frac = (0.3, 0.2);
+        // A rising diagonal crosses the upper-right box; the upper left is free.
+        let rising = vec![(0.0, 0.0), (1.0, 1.0)];
+        let (pos, top) = place_legend(std::slice::from_ref(&rising), unit, unit, frac);
+        assert!(matches!(pos, UpperLeft) && top == 1.0);
+        // A falling one crosses the upper left; a point in the upper-right box blocks it too.
+        let falling = vec![(0.0, 1.0), (1.0, 0.0)];
+        let (pos, _) = place_legend(&[falling.clone(), vec![(0.9, 0.9)]], unit, unit, frac);
+        assert!(matches!(pos, LowerLeft), "{pos:?}");
+        // Both diagonals take every corner: the range grows until the top strip is free.
+        let (pos, top) = place_legend(&[rising.clone(), falling.clone()], unit, unit, frac);
+        assert!(
+            matches!(pos, UpperRight) && (top - 1.27).abs() < 1e-12,
+            "{pos:?} {top}"
+        );
+        let (pos, again) = place_legend(&[rising, falling], unit, (0.0, top), frac);
+        assert!(matches!(pos, UpperRight) && again == top, "{pos:?} {again}");
+    }
 }

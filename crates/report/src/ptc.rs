@@ -1,7 +1,7 @@
 //! The photon-transfer plot of an EMVA 1288 measurement (twin::sensor::ptc), and its raw
 //! frames written as an EMVA 1288 descriptor file + 16-bit PNGs for the reference code.
 
-use crate::plot::register_font;
+use crate::plot::{render_png, show, tick_label};
 use plotters::prelude::*;
 use specmux_core::{Cube, Error, Result};
 use specmux_twin::sensor::{PtcFrames, PtcResult};
@@ -57,13 +57,6 @@ pub fn write_emva_dataset(dir: &Path, frames: &PtcFrames, bits: u32) -> Result<(
 /// Write the photon-transfer curve as a PNG: σ_y² − σ_y.dark² against μ_y − μ_y.dark (linear
 /// axes, as in EMVA 1288 data sheets), the fitted line over its range and the saturation.
 pub fn plot_ptc(result: &PtcResult, path: &Path) -> Result<()> {
-    const W: u32 = 900;
-    const H: u32 = 600;
-    let fail = |msg: String| Error::Image {
-        path: path.to_path_buf(),
-        msg,
-    };
-    register_font(path)?;
     let pts: Vec<(f64, f64)> = result
         .points
         .iter()
@@ -77,12 +70,8 @@ pub fn plot_ptc(result: &PtcResult, path: &Path) -> Result<()> {
     let x_max = pts.iter().map(|p| p.0).fold(1.0, f64::max) * 1.05;
     let y_max = pts.iter().map(|p| p.1).fold(1.0, f64::max) * 1.1;
     let y_min = pts.iter().map(|p| p.1).fold(0.0, f64::min);
-    let mut rgb = vec![0u8; (W * H * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut rgb, (W, H)).into_drawing_area();
-        let draw = |e: &dyn std::fmt::Display| fail(format!("drawing the PTC: {e}"));
-        root.fill(&WHITE).map_err(|e| draw(&e))?;
-        let mut chart = ChartBuilder::on(&root)
+    render_png(path, (900, 600), |root| {
+        let mut chart = ChartBuilder::on(root)
             .caption(
                 format!(
                     "Photon transfer: K = {:.4} ± {:.4} DN/e⁻, σ_d = {:.2} e⁻, μ_e.sat = {:.0} e⁻",
@@ -97,40 +86,43 @@ pub fn plot_ptc(result: &PtcResult, path: &Path) -> Result<()> {
             .x_label_area_size(45)
             .y_label_area_size(70)
             .build_cartesian_2d(0.0..x_max, y_min..y_max)
-            .map_err(|e| draw(&e))?;
+            .map_err(show)?;
         chart
             .configure_mesh()
             .x_desc("μ_y − μ_y.dark (DN)")
             .y_desc("σ_y² − σ_y.dark² (DN²)")
+            .x_label_formatter(&|v| tick_label(*v, x_max))
+            .y_label_formatter(&|v| tick_label(*v, y_max - y_min))
             .label_style(("sans-serif", 15))
             .draw()
-            .map_err(|e| draw(&e))?;
+            .map_err(show)?;
         chart
             .draw_series(pts.iter().map(|&p| Circle::new(p, 3, BLUE.filled())))
-            .map_err(|e| draw(&e))?
+            .map_err(show)?
             .label("measured pairs")
             .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
         let line = |x: f64| result.fit_offset_dn2 + result.k_dn_per_e * x;
-        chart
-            .draw_series(LineSeries::new(
-                [
-                    (0.0, line(0.0)),
-                    (result.fit_max_signal_dn, line(result.fit_max_signal_dn)),
-                ],
-                BLACK.stroke_width(2),
-            ))
-            .map_err(|e| draw(&e))?
-            .label("fit (0–70 % of saturation)")
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.stroke_width(2)));
         let x_sat = result.saturation_mean_dn - result.dark_mean_dn;
-        chart
-            .draw_series(LineSeries::new(
+        let fit_end = result.fit_max_signal_dn;
+        for (seg, color, label) in [
+            (
+                [(0.0, line(0.0)), (fit_end, line(fit_end))],
+                BLACK,
+                "fit (0–70 % of saturation)",
+            ),
+            (
                 [(x_sat, y_min), (x_sat, y_max)],
-                RED.stroke_width(2),
-            ))
-            .map_err(|e| draw(&e))?
-            .label("saturation (variance maximum)")
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], RED.stroke_width(2)));
+                RED,
+                "saturation (variance maximum)",
+            ),
+        ] {
+            let style = color.stroke_width(2);
+            chart
+                .draw_series(LineSeries::new(seg, style))
+                .map_err(show)?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], style));
+        }
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::UpperLeft)
@@ -138,15 +130,6 @@ pub fn plot_ptc(result: &PtcResult, path: &Path) -> Result<()> {
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()
-            .map_err(|e| draw(&e))?;
-        root.present().map_err(|e| draw(&e))?;
-    }
-    let mut png = Vec::new();
-    {
-        use image::ImageEncoder;
-        image::codecs::png::PngEncoder::new(&mut png)
-            .write_image(&rgb, W, H, image::ExtendedColorType::Rgb8)
-            .map_err(|e| fail(format!("encoding the PTC as PNG: {e}")))?;
-    }
-    specmux_io::atomic::write_bytes(path, &png)
+            .map_err(show)
+    })
 }
