@@ -146,6 +146,8 @@ enum Command {
         run: controller::RunArgs,
         #[arg(long, default_value = "sim")]
         backend: String,
+        #[command(flatten)]
+        real: specmux_controller::real::RealRigArgs,
     },
 }
 
@@ -244,8 +246,8 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
         } => commands::reconstruct(&frame, experiment.as_deref(), truth.as_deref(), &out, lib),
         Command::Rehearse(a) => return controller::rehearse(&a.into(), lib),
-        Command::Acquire { run, backend } => {
-            return controller::acquire(&backend, &run.into(), lib)
+        Command::Acquire { run, backend, real } => {
+            return controller::acquire(&backend, &run.into(), &real, lib)
         }
     };
     done.map_err(|e| e.to_string())

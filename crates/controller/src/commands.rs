@@ -5,6 +5,7 @@
 use crate::devices::Frame;
 use crate::error::{Error, Result};
 use crate::plan::{DeviceLimits, HostLimits, Plan};
+use crate::real::RealRigArgs;
 use crate::record::Recorder;
 use crate::run::{self, FrameRecord, Outcome, Sink};
 use crate::sim::{Fault, Faults, SimRig};
@@ -62,14 +63,10 @@ macro_rules! say {
     }};
 }
 
-/// The plan for the simulated rig of an experiment, with its summary, checks and timeline.
-fn sim_plan(exp: &Experiment, frames: usize, out: &Path) -> (Plan, String) {
-    let plan = Plan::new(
-        exp,
-        frames,
-        &DeviceLimits::of_twin(exp),
-        &HostLimits::measure(out),
-    );
+/// The plan of an experiment on devices with these limits, with its summary, checks and
+/// timeline.
+fn plan_for(exp: &Experiment, frames: usize, limits: &DeviceLimits, out: &Path) -> (Plan, String) {
+    let plan = Plan::new(exp, frames, limits, &HostLimits::measure(out));
     let text = format!(
         "{}{}{}",
         plan.summary(),
@@ -186,7 +183,7 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
     let faults = faults(&o.faults)?;
-    let (plan, text) = sim_plan(&exp, frames, out);
+    let (plan, text) = plan_for(&exp, frames, &DeviceLimits::of_twin(&exp), out);
     if dry {
         return Ok(dry_run(&plan, text));
     }
@@ -214,7 +211,7 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
     let mut text = text;
     text += &frame_table(&sink.rows);
-    text += &outcome_text(&outcome, sim.now_s(), wall.elapsed().as_secs_f64());
+    text += &outcome_text(&outcome, Some(sim.now_s()), wall.elapsed().as_secs_f64());
     say!(text, "wrote {}", out.display());
     Ok(text)
 }
@@ -269,7 +266,8 @@ fn mean_sam(frames: &[&RehearsedFrame]) -> String {
     )
 }
 
-fn outcome_text(o: &Outcome, virtual_s: f64, wall_s: f64) -> String {
+/// What a run did; `virtual_s` is the simulated rig's clock (None on the real rig).
+fn outcome_text(o: &Outcome, virtual_s: Option<f64>, wall_s: f64) -> String {
     let mut t = String::new();
     let flagged = o.frames.iter().filter(|r| !r.ok()).count();
     say!(
@@ -290,7 +288,10 @@ fn outcome_text(o: &Outcome, virtual_s: f64, wall_s: f64) -> String {
         ),
         None => say!(t, "completed; devices stopped camera → DMD → wheel"),
     }
-    say!(t, "virtual time {virtual_s:.3} s, wall time {wall_s:.2} s");
+    match virtual_s {
+        Some(v) => say!(t, "virtual time {v:.3} s, wall time {wall_s:.2} s"),
+        None => say!(t, "wall time {wall_s:.2} s"),
+    }
     t
 }
 
@@ -322,29 +323,55 @@ impl Sink for Acquisition {
 }
 
 /// `specmux acquire`: the same plan on the simulated devices (`sim`) or the real ones
-/// (`real`), writing the same files. An acquisition that stops early is an error, after its
-/// files are written.
+/// (`real`, opened from `real`), writing the same files. An acquisition that stops early is an
+/// error, after its files are written.
 pub fn acquire(
     backend: &str,
     o: &RunOptions,
+    real: &RealRigArgs,
     lib: &Library,
 ) -> std::result::Result<String, String> {
-    acquire_in(backend, o, &o.out_or("out/acquire"), lib).map_err(|e| e.to_string())
+    acquire_in(backend, o, real, &o.out_or("out/acquire"), lib).map_err(|e| e.to_string())
 }
 
-fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
+fn acquire_in(
+    backend: &str,
+    o: &RunOptions,
+    real: &RealRigArgs,
+    out: &Path,
+    lib: &Library,
+) -> Result<String> {
     let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
-    if backend != "sim" {
-        return Err(Error::refused("--backend", backend, real_backends_note()));
-    }
-    let (plan, text) = sim_plan(&exp, frames, out);
+    let faults = faults(&o.faults)?;
+    // The real rig is opened (inquiries only) even for a dry run: the plan needs its limits.
+    let (real_devices, limits) = match backend {
+        "sim" => (None, DeviceLimits::of_twin(&exp)),
+        "real" if !faults.0.is_empty() => {
+            return Err(Error::refused(
+                "--fault",
+                &o.faults[0],
+                "faults are injected in the simulated rig only",
+            ))
+        }
+        "real" => {
+            let (d, l) = crate::real::open_rig(real, &exp)?;
+            (Some(d), l)
+        }
+        other => return Err(Error::refused("--backend", other, "`sim` or `real`")),
+    };
+    let (plan, text) = plan_for(&exp, frames, &limits, out);
     if dry {
         return Ok(dry_run(&plan, text));
     }
     plan.verify()?;
     let wall = Instant::now();
-    let (sim, _) = SimRig::new(&exp, lib, faults(&o.faults)?)?;
-    let mut dev = sim.devices();
+    let (mut dev, sim) = match real_devices {
+        Some(d) => (d, None),
+        None => {
+            let (sim, _) = SimRig::new(&exp, lib, faults)?;
+            (sim.devices(), Some(sim))
+        }
+    };
     let progress = std::io::stderr().is_terminal();
     let mut sink = Acquisition {
         recorder: Recorder::create(out, &plan)?,
@@ -353,7 +380,8 @@ fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Resul
         progress,
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
-    sink.recorder.finish(&outcome, &sim.events())?;
+    let events = sim.as_ref().map_or_else(|| dev.events(), |s| s.events());
+    sink.recorder.finish(&outcome, &events)?;
     if progress {
         eprintln!();
     }
@@ -372,15 +400,13 @@ fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Resul
         ));
     }
     let mut text = text;
-    text += &outcome_text(&outcome, sim.now_s(), wall.elapsed().as_secs_f64());
+    text += &outcome_text(
+        &outcome,
+        sim.map(|s| s.now_s()),
+        wall.elapsed().as_secs_f64(),
+    );
     say!(text, "wrote {}", out.display());
     Ok(text)
-}
-
-/// Why `--backend real` is refused in this build.
-fn real_backends_note() -> &'static str {
-    "only `sim` runs a whole rig: the serial wheel (feature serial-wheel) and ALP-4 DMD (feature alp4) backends exist, \
-     a GenICam camera backend does not yet (docs/controller.md, \"Running the rig for real\")"
 }
 
 /// The plan of `rehearse` and `acquire`.

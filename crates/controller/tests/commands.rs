@@ -4,6 +4,7 @@ mod common;
 
 use specmux_controller::commands::{acquire, rehearse, RunOptions};
 use specmux_controller::ome;
+use specmux_controller::real::RealRigArgs;
 use std::path::PathBuf;
 
 fn setup(name: &str, scene: &str) -> (PathBuf, PathBuf) {
@@ -84,7 +85,8 @@ fn rehearsing_a_moving_scene_reconstructs_every_frame() {
 fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
     let (file, out) = setup("acquire", "");
     let o = RunOptions::new(file, 2, false, vec![], Some(out.clone()));
-    let text = acquire("sim", &o, &common::lib()).unwrap();
+    let none = RealRigArgs::default();
+    let text = acquire("sim", &o, &none, &common::lib()).unwrap();
     assert!(text.contains("completed"), "{text}");
     for f in [
         "plan.json",
@@ -97,14 +99,24 @@ fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
     ] {
         assert!(out.join(f).exists(), "{f}");
     }
-    let err = acquire("real", &o, &common::lib()).unwrap_err();
+    // The real rig without its devices: one line naming each one missing, never a panic.
+    let err = acquire("real", &o, &none, &common::lib()).unwrap_err();
     assert!(err.starts_with("plan refused: `--backend` = real"), "{err}");
+    for device in ["wheel: ", "DMD: ", "camera: "] {
+        assert!(err.contains(device) && !err.contains('\n'), "{err}");
+    }
+    let err = acquire("laser", &o, &none, &common::lib()).unwrap_err();
+    assert!(
+        err.starts_with("plan refused: `--backend` = laser"),
+        "{err}"
+    );
     let err = acquire(
         "sim",
         &RunOptions {
             faults: vec!["camera-stops@1".into()],
             ..o
         },
+        &none,
         &common::lib(),
     )
     .unwrap_err();
