@@ -126,7 +126,8 @@ enum Command {
         #[command(subcommand)]
         what: specmux_design::DesignCommand,
     },
-    /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig.
+    /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig, or every
+    /// frame of a recording folder (`acquire`/`rehearse`) with the calibration acquired in it.
     Reconstruct {
         frame: PathBuf,
         #[arg(long)]
@@ -239,6 +240,19 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
         } => commands::ptc(experiment.as_deref(), size, &out),
         Command::Design { what } => what.run(lib),
+        // A folder is a recording (`specmux acquire`/`rehearse`): its own experiment,
+        // calibration and truths are used.
+        Command::Reconstruct {
+            frame,
+            out,
+            experiment,
+            truth,
+        } if frame.is_dir() => {
+            if experiment.is_some() || truth.is_some() {
+                return Err(format!("{}: a recording brings its own experiment and truths; --experiment and --truth are for one frame", frame.display()));
+            }
+            return specmux_controller::reconstruct::reconstruct_recording(&frame, &out, lib);
+        }
         Command::Reconstruct {
             frame,
             experiment,

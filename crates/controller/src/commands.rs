@@ -6,12 +6,13 @@ use crate::devices::Frame;
 use crate::error::{Error, Result};
 use crate::plan::{DeviceLimits, HostLimits, Plan};
 use crate::real::RealRigArgs;
+use crate::reconstruct::{
+    self, frame_table, reconstruct_frame, ReconstructedFrame, RecordedFrame, TruthTime,
+};
 use crate::record::Recorder;
 use crate::run::{self, FrameRecord, Outcome, Sink};
 use crate::sim::{Fault, Faults, SimRig};
-use serde::Serialize;
 use specmux_core::calibration::{Calibration, CalibrationFrames};
-use specmux_core::metrics;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
@@ -88,18 +89,6 @@ fn dry_run(plan: &Plan, mut text: String) -> String {
     text
 }
 
-/// One reconstructed frame of a rehearsal.
-#[derive(Clone, Debug, Serialize)]
-pub struct RehearsedFrame {
-    pub frame_id: u64,
-    pub timestamp_s: f64,
-    pub flags: usize,
-    pub psnr_db: f64,
-    pub ssim: f64,
-    pub sam_deg: Option<f64>,
-    pub reconstruction_s: f64,
-}
-
 /// Records the rehearsal and reconstructs each frame as it arrives, with the calibration
 /// acquired in the same run.
 struct Rehearsal<'a> {
@@ -108,7 +97,9 @@ struct Rehearsal<'a> {
     exp: &'a Experiment,
     rig: Rig,
     recon: Option<Reconstructor>,
-    rows: Vec<RehearsedFrame>,
+    rows: Vec<ReconstructedFrame>,
+    /// When each frame's truth was in front of the camera, for `truth.json`.
+    truths: Vec<TruthTime>,
     frames: usize,
     progress: bool,
 }
@@ -133,25 +124,24 @@ impl Sink for Rehearsal<'_> {
             .recon
             .as_ref()
             .ok_or_else(|| Error::device("controller", "a frame before the calibration"))?;
-        let raw = Cube::from_vec(
-            frame.width,
-            frame.height,
-            1,
-            frame.data.iter().map(|&v| v as f32).collect(),
-        )?;
-        let t = Instant::now();
-        let out = recon.run(&raw, None)?;
-        let seconds = t.elapsed().as_secs_f64();
-        let m = metrics::compare(&self.sim.truth(frame)?, &out.cube)?;
-        self.rows.push(RehearsedFrame {
+        let f = RecordedFrame {
             frame_id: r.frame_id,
             timestamp_s: r.timestamp_s,
             flags: r.flags.len(),
-            psnr_db: m.psnr_db,
-            ssim: m.ssim,
-            sam_deg: m.sam_deg,
-            reconstruction_s: seconds,
+            raw: Cube::from_vec(
+                frame.width,
+                frame.height,
+                1,
+                frame.data.iter().map(|&v| v as f32).collect(),
+            )?,
+        };
+        let truth = self.sim.truth(frame)?;
+        self.truths.push(TruthTime {
+            frame_id: r.frame_id,
+            scene_t_s: self.sim.scene_time_s(frame),
         });
+        self.rows
+            .push(reconstruct_frame(recon, &f, Some(&truth))?.1);
         if self.progress {
             eprint!("\rframe {}/{}", self.rows.len(), self.frames);
         }
@@ -191,7 +181,7 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let wall = Instant::now();
     let (sim, rig) = SimRig::new(&exp, lib, faults)?;
     let mut dev = sim.devices();
-    let recorder = Recorder::create(out, &plan)?;
+    let recorder = Recorder::create(out, &plan, &exp)?;
     let progress = std::io::stderr().is_terminal();
     let mut sink = Rehearsal {
         recorder,
@@ -200,6 +190,7 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
         rig,
         recon: None,
         rows: Vec::new(),
+        truths: Vec::new(),
         frames,
         progress,
     };
@@ -209,61 +200,12 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
         eprintln!();
     }
     specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
+    reconstruct::write_truth_times(out, &sink.truths)?;
     let mut text = text;
     text += &frame_table(&sink.rows);
     text += &outcome_text(&outcome, Some(sim.now_s()), wall.elapsed().as_secs_f64());
     say!(text, "wrote {}", out.display());
     Ok(text)
-}
-
-fn frame_table(rows: &[RehearsedFrame]) -> String {
-    let mut t = format!(
-        "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9}\n",
-        "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s"
-    );
-    for r in rows {
-        t += &format!(
-            "{:>6} {:>10.6} {:>6} {:>9.2} {:>7.4} {:>9} {:>9.4}\n",
-            r.frame_id,
-            r.timestamp_s,
-            r.flags,
-            r.psnr_db,
-            r.ssim,
-            specmux_core::metrics::show(r.sam_deg, 2),
-            r.reconstruction_s
-        );
-    }
-    let clean: Vec<&RehearsedFrame> = rows.iter().filter(|r| r.flags == 0).collect();
-    if !clean.is_empty() {
-        let n = clean.len() as f64;
-        let mean = |f: fn(&RehearsedFrame) -> f64| clean.iter().map(|r| f(r)).sum::<f64>() / n;
-        let lo = clean
-            .iter()
-            .map(|r| r.psnr_db)
-            .fold(f64::INFINITY, f64::min);
-        let hi = clean
-            .iter()
-            .map(|r| r.psnr_db)
-            .fold(f64::NEG_INFINITY, f64::max);
-        t += &format!(
-            "clean frames {}: cube PSNR mean {:.2} dB (min {lo:.2}, max {hi:.2}), SSIM {:.4}, SAM {}°; reconstruction {:.4} s/frame\n",
-            clean.len(),
-            mean(|r| r.psnr_db),
-            mean(|r| r.ssim),
-            mean_sam(&clean),
-            mean(|r| r.reconstruction_s)
-        );
-    }
-    t
-}
-
-/// The mean SAM over frames where it is defined ("undefined" when it is nowhere).
-fn mean_sam(frames: &[&RehearsedFrame]) -> String {
-    let v: Vec<f64> = frames.iter().filter_map(|r| r.sam_deg).collect();
-    specmux_core::metrics::show(
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64),
-        2,
-    )
 }
 
 /// What a run did; `virtual_s` is the simulated rig's clock (None on the real rig).
@@ -374,7 +316,7 @@ fn acquire_in(
     };
     let progress = std::io::stderr().is_terminal();
     let mut sink = Acquisition {
-        recorder: Recorder::create(out, &plan)?,
+        recorder: Recorder::create(out, &plan, &exp)?,
         frames,
         done: 0,
         progress,

@@ -149,3 +149,43 @@ fn only_the_shaded_objects_can_move_and_at_a_finite_speed() {
     .scene
     .moves());
 }
+
+#[test]
+fn a_rehearsal_folder_reconstructs_to_the_errors_the_rehearsal_reported() {
+    use specmux_controller::reconstruct::reconstruct_recording;
+    let (file, rec) = setup("replay", "velocity_px_per_s = [200, 0]");
+    let o = RunOptions::new(file, 3, false, vec![], Some(rec.clone()));
+    rehearse(&o, &common::lib()).unwrap();
+    let out = rec.with_file_name("replay-out");
+    let text = reconstruct_recording(&rec, &out, &common::lib()).unwrap();
+    assert!(text.contains("3 frames reconstructed"), "{text}");
+    let read = |p: PathBuf| -> Vec<serde_json::Value> {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (rehearsed, replayed) = (
+        read(rec.join("rehearsal.json")),
+        read(out.join("reconstruct.json")),
+    );
+    assert_eq!(replayed.len(), 3);
+    for (a, b) in rehearsed.iter().zip(&replayed) {
+        assert_eq!(a["frame_id"], b["frame_id"]);
+        // The same frames, calibration and rig: the same cube, to the last bit.
+        for k in ["psnr_db", "ssim", "sam_deg"] {
+            assert_eq!(a[k], b[k], "{k}: {a} vs {b}");
+        }
+        assert!(b["psnr_db"].as_f64().unwrap() > 15.0, "{b}");
+        let id = b["frame_id"].as_u64().unwrap();
+        let (cube, names) = specmux_io::exr::read(&out.join(format!("cube-{id:06}.exr"))).unwrap();
+        assert_eq!(
+            (cube.width, cube.height, cube.planes),
+            (64, 64, names.len())
+        );
+    }
+    // Without the truths (an acquisition), frames are reconstructed and no error is claimed.
+    std::fs::remove_file(rec.join("truth.json")).unwrap();
+    let text = reconstruct_recording(&rec, &out, &common::lib()).unwrap();
+    assert!(text.contains("no truth in this recording"), "{text}");
+    assert!(read(out.join("reconstruct.json"))
+        .iter()
+        .all(|r| r["psnr_db"].is_null()));
+}
