@@ -23,6 +23,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "core",
         &[
             &["error"],
+            &["interrupt"],
             &["cube", "spectral"],
             &["fft"],
             &["carriers"],
@@ -62,7 +63,6 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         &[
             &["error"],
             &["log"],
-            &["signal"],
             &["devices"],
             &["plan"],
             &["patterns"],
@@ -71,6 +71,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["sim"],
             &["run"],
             &["record"],
+            &["reconstruct"],
             &["commands"],
         ],
     ),

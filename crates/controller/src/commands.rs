@@ -12,6 +12,7 @@ use crate::reconstruct::{
 use crate::record::Recorder;
 use crate::run::{self, FrameRecord, Outcome, Sink};
 use crate::sim::{Fault, Faults, SimRig};
+use indicatif::{ProgressBar, ProgressStyle};
 use specmux_core::calibration::{Calibration, CalibrationFrames};
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
@@ -100,8 +101,7 @@ struct Rehearsal<'a> {
     rows: Vec<ReconstructedFrame>,
     /// When each frame's truth was in front of the camera, for `truth.json`.
     truths: Vec<TruthTime>,
-    frames: usize,
-    progress: bool,
+    bar: ProgressBar,
 }
 
 impl Sink for Rehearsal<'_> {
@@ -142,9 +142,7 @@ impl Sink for Rehearsal<'_> {
         });
         self.rows
             .push(reconstruct_frame(recon, &f, Some(&truth))?.1);
-        if self.progress {
-            eprint!("\rframe {}/{}", self.rows.len(), self.frames);
-        }
+        self.bar.inc(1);
         Ok(())
     }
 
@@ -182,7 +180,6 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let (sim, rig) = SimRig::new(&exp, lib, faults)?;
     let mut dev = sim.devices();
     let recorder = Recorder::create(out, &plan, &exp)?;
-    let progress = std::io::stderr().is_terminal();
     let mut sink = Rehearsal {
         recorder,
         sim: sim.clone(),
@@ -191,21 +188,36 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
         recon: None,
         rows: Vec::new(),
         truths: Vec::new(),
-        frames,
-        progress,
+        bar: frame_bar(frames),
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
     sink.recorder.finish(&outcome, &sim.events())?;
-    if progress {
-        eprintln!();
-    }
+    sink.bar.finish_and_clear();
     specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
     reconstruct::write_truth_times(out, &sink.truths)?;
+    // A rehearsal stopped by a fault reports it below; one stopped by Ctrl-C is an error (exit
+    // status 130), its files written.
+    if !outcome.completed && outcome.stopped_because.is_none() {
+        return Err(stopped_early("rehearse", &outcome, out));
+    }
     let mut text = text;
     text += &frame_table(&sink.rows);
     text += &outcome_text(&outcome, Some(sim.now_s()), wall.elapsed().as_secs_f64());
     say!(text, "wrote {}", out.display());
     Ok(text)
+}
+
+/// The one-line error of a run that stopped early, after its files are written.
+fn stopped_early(command: &str, outcome: &Outcome, out: &Path) -> Error {
+    let why = outcome
+        .stopped_because
+        .clone()
+        .unwrap_or_else(|| "stopped by the operator".into());
+    let n = outcome.frames.len();
+    Error::device(
+        command,
+        format!("{why}; {n} frames kept in {}", out.display()),
+    )
 }
 
 /// What a run did; `virtual_s` is the simulated rig's clock (None on the real rig).
@@ -237,12 +249,26 @@ fn outcome_text(o: &Outcome, virtual_s: Option<f64>, wall_s: f64) -> String {
     t
 }
 
+/// A progress bar of `frames` frames on stderr, drawn only when stderr is a terminal (stdout
+/// stays the report).
+fn frame_bar(frames: usize) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(frames as u64);
+    let style = ProgressStyle::with_template(
+        "frames [{bar:40}] {pos}/{len} {elapsed_precise} (eta {eta}) — Ctrl-C stops safely",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar())
+    .progress_chars("=> ");
+    bar.set_style(style);
+    bar
+}
+
 /// A recorder that also shows progress and honours Ctrl-C.
 struct Acquisition {
     recorder: Recorder,
-    frames: usize,
-    done: usize,
-    progress: bool,
+    bar: ProgressBar,
 }
 
 impl Sink for Acquisition {
@@ -252,10 +278,7 @@ impl Sink for Acquisition {
 
     fn frame(&mut self, r: &FrameRecord, frame: &Frame) -> Result<()> {
         self.recorder.frame(r, frame)?;
-        self.done += 1;
-        if self.progress {
-            eprint!("\rframe {}/{}", self.done, self.frames);
-        }
+        self.bar.inc(1);
         Ok(())
     }
 
@@ -314,32 +337,16 @@ fn acquire_in(
             (sim.devices(), Some(sim))
         }
     };
-    let progress = std::io::stderr().is_terminal();
     let mut sink = Acquisition {
         recorder: Recorder::create(out, &plan, &exp)?,
-        frames,
-        done: 0,
-        progress,
+        bar: frame_bar(frames),
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
     let events = sim.as_ref().map_or_else(|| dev.events(), |s| s.events());
     sink.recorder.finish(&outcome, &events)?;
-    if progress {
-        eprintln!();
-    }
+    sink.bar.finish_and_clear();
     if !outcome.completed {
-        let why = outcome
-            .stopped_because
-            .clone()
-            .unwrap_or_else(|| "stopped by the operator".into());
-        return Err(Error::device(
-            "acquire",
-            format!(
-                "{why}; {} frames kept in {}",
-                outcome.frames.len(),
-                out.display()
-            ),
-        ));
+        return Err(stopped_early("acquire", &outcome, out));
     }
     let mut text = text;
     text += &outcome_text(

@@ -188,4 +188,5 @@ fn a_rehearsal_folder_reconstructs_to_the_errors_the_rehearsal_reported() {
     assert!(read(out.join("reconstruct.json"))
         .iter()
         .all(|r| r["psnr_db"].is_null()));
+    std::fs::remove_dir_all(rec.parent().unwrap()).unwrap();
 }
