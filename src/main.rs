@@ -130,7 +130,8 @@ enum Command {
         #[command(subcommand)]
         what: specmux_design::DesignCommand,
     },
-    /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig.
+    /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig, or every
+    /// frame of a recording folder (`acquire`/`rehearse`) with the calibration acquired in it.
     Reconstruct {
         frame: PathBuf,
         #[arg(long)]
@@ -150,6 +151,8 @@ enum Command {
         run: controller::RunArgs,
         #[arg(long, default_value = "sim")]
         backend: String,
+        #[command(flatten)]
+        real: specmux_controller::real::RealRigArgs,
     },
 }
 
@@ -242,6 +245,19 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
         } => commands::ptc(experiment.as_deref(), size, emva, &out),
         Command::Design { what } => what.run(lib),
+        // A folder is a recording (`specmux acquire`/`rehearse`): its own experiment,
+        // calibration and truths are used.
+        Command::Reconstruct {
+            frame,
+            out,
+            experiment,
+            truth,
+        } if frame.is_dir() => {
+            if experiment.is_some() || truth.is_some() {
+                return Err(format!("{}: a recording brings its own experiment and truths; --experiment and --truth are for one frame", frame.display()));
+            }
+            return specmux_controller::reconstruct::reconstruct_recording(&frame, &out, lib);
+        }
         Command::Reconstruct {
             frame,
             experiment,
@@ -249,8 +265,8 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
         } => commands::reconstruct(&frame, experiment.as_deref(), truth.as_deref(), &out, lib),
         Command::Rehearse(a) => return controller::rehearse(&a.into(), lib),
-        Command::Acquire { run, backend } => {
-            return controller::acquire(&backend, &run.into(), lib)
+        Command::Acquire { run, backend, real } => {
+            return controller::acquire(&backend, &run.into(), &real, lib)
         }
     };
     done.map_err(|e| e.to_string())

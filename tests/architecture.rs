@@ -70,6 +70,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["sim"],
             &["run"],
             &["record"],
+            &["reconstruct"],
             &["commands"],
         ],
     ),

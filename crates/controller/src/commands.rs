@@ -5,12 +5,15 @@
 use crate::devices::Frame;
 use crate::error::{Error, Result};
 use crate::plan::{DeviceLimits, HostLimits, Plan};
+use crate::real::RealRigArgs;
+use crate::reconstruct::{
+    self, frame_table, reconstruct_frame, ReconstructedFrame, RecordedFrame, TruthTime,
+};
 use crate::record::Recorder;
 use crate::run::{self, FrameRecord, Outcome, Sink};
 use crate::sim::{Fault, Faults, SimRig};
-use serde::Serialize;
+use indicatif::{ProgressBar, ProgressStyle};
 use specmux_core::calibration::{Calibration, CalibrationFrames};
-use specmux_core::metrics;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
@@ -62,14 +65,10 @@ macro_rules! say {
     }};
 }
 
-/// The plan for the simulated rig of an experiment, with its summary, checks and timeline.
-fn sim_plan(exp: &Experiment, frames: usize, out: &Path) -> (Plan, String) {
-    let plan = Plan::new(
-        exp,
-        frames,
-        &DeviceLimits::of_twin(exp),
-        &HostLimits::measure(out),
-    );
+/// The plan of an experiment on devices with these limits, with its summary, checks and
+/// timeline.
+fn plan_for(exp: &Experiment, frames: usize, limits: &DeviceLimits, out: &Path) -> (Plan, String) {
+    let plan = Plan::new(exp, frames, limits, &HostLimits::measure(out));
     let text = format!(
         "{}{}{}",
         plan.summary(),
@@ -91,18 +90,6 @@ fn dry_run(plan: &Plan, mut text: String) -> String {
     text
 }
 
-/// One reconstructed frame of a rehearsal.
-#[derive(Clone, Debug, Serialize)]
-pub struct RehearsedFrame {
-    pub frame_id: u64,
-    pub timestamp_s: f64,
-    pub flags: usize,
-    pub psnr_db: f64,
-    pub ssim: f64,
-    pub sam_deg: Option<f64>,
-    pub reconstruction_s: f64,
-}
-
 /// Records the rehearsal and reconstructs each frame as it arrives, with the calibration
 /// acquired in the same run.
 struct Rehearsal<'a> {
@@ -111,9 +98,10 @@ struct Rehearsal<'a> {
     exp: &'a Experiment,
     rig: Rig,
     recon: Option<Reconstructor>,
-    rows: Vec<RehearsedFrame>,
-    frames: usize,
-    progress: bool,
+    rows: Vec<ReconstructedFrame>,
+    /// When each frame's truth was in front of the camera, for `truth.json`.
+    truths: Vec<TruthTime>,
+    bar: ProgressBar,
 }
 
 impl Sink for Rehearsal<'_> {
@@ -136,28 +124,25 @@ impl Sink for Rehearsal<'_> {
             .recon
             .as_ref()
             .ok_or_else(|| Error::device("controller", "a frame before the calibration"))?;
-        let raw = Cube::from_vec(
-            frame.width,
-            frame.height,
-            1,
-            frame.data.iter().map(|&v| v as f32).collect(),
-        )?;
-        let t = Instant::now();
-        let out = recon.run(&raw, None)?;
-        let seconds = t.elapsed().as_secs_f64();
-        let m = metrics::compare(&self.sim.truth(frame)?, &out.cube)?;
-        self.rows.push(RehearsedFrame {
+        let f = RecordedFrame {
             frame_id: r.frame_id,
             timestamp_s: r.timestamp_s,
             flags: r.flags.len(),
-            psnr_db: m.psnr_db,
-            ssim: m.ssim,
-            sam_deg: m.sam_deg,
-            reconstruction_s: seconds,
+            raw: Cube::from_vec(
+                frame.width,
+                frame.height,
+                1,
+                frame.data.iter().map(|&v| v as f32).collect(),
+            )?,
+        };
+        let truth = self.sim.truth(frame)?;
+        self.truths.push(TruthTime {
+            frame_id: r.frame_id,
+            scene_t_s: self.sim.scene_time_s(frame),
         });
-        if self.progress {
-            eprint!("\rframe {}/{}", self.rows.len(), self.frames);
-        }
+        self.rows
+            .push(reconstruct_frame(recon, &f, Some(&truth))?.1);
+        self.bar.inc(1);
         Ok(())
     }
 
@@ -186,7 +171,7 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
     let faults = faults(&o.faults)?;
-    let (plan, text) = sim_plan(&exp, frames, out);
+    let (plan, text) = plan_for(&exp, frames, &DeviceLimits::of_twin(&exp), out);
     if dry {
         return Ok(dry_run(&plan, text));
     }
@@ -194,8 +179,7 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let wall = Instant::now();
     let (sim, rig) = SimRig::new(&exp, lib, faults)?;
     let mut dev = sim.devices();
-    let recorder = Recorder::create(out, &plan)?;
-    let progress = std::io::stderr().is_terminal();
+    let recorder = Recorder::create(out, &plan, &exp)?;
     let mut sink = Rehearsal {
         recorder,
         sim: sim.clone(),
@@ -203,73 +187,41 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
         rig,
         recon: None,
         rows: Vec::new(),
-        frames,
-        progress,
+        truths: Vec::new(),
+        bar: frame_bar(frames),
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
     sink.recorder.finish(&outcome, &sim.events())?;
-    if progress {
-        eprintln!();
-    }
+    sink.bar.finish_and_clear();
     specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
+    reconstruct::write_truth_times(out, &sink.truths)?;
+    // A rehearsal stopped by a fault reports it below; one stopped by Ctrl-C is an error (exit
+    // status 130), its files written.
+    if !outcome.completed && outcome.stopped_because.is_none() {
+        return Err(stopped_early("rehearse", &outcome, out));
+    }
     let mut text = text;
     text += &frame_table(&sink.rows);
-    text += &outcome_text(&outcome, sim.now_s(), wall.elapsed().as_secs_f64());
+    text += &outcome_text(&outcome, Some(sim.now_s()), wall.elapsed().as_secs_f64());
     say!(text, "wrote {}", out.display());
     Ok(text)
 }
 
-fn frame_table(rows: &[RehearsedFrame]) -> String {
-    let mut t = format!(
-        "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9}\n",
-        "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s"
-    );
-    for r in rows {
-        t += &format!(
-            "{:>6} {:>10.6} {:>6} {:>9.2} {:>7.4} {:>9} {:>9.4}\n",
-            r.frame_id,
-            r.timestamp_s,
-            r.flags,
-            r.psnr_db,
-            r.ssim,
-            specmux_core::metrics::show(r.sam_deg, 2),
-            r.reconstruction_s
-        );
-    }
-    let clean: Vec<&RehearsedFrame> = rows.iter().filter(|r| r.flags == 0).collect();
-    if !clean.is_empty() {
-        let n = clean.len() as f64;
-        let mean = |f: fn(&RehearsedFrame) -> f64| clean.iter().map(|r| f(r)).sum::<f64>() / n;
-        let lo = clean
-            .iter()
-            .map(|r| r.psnr_db)
-            .fold(f64::INFINITY, f64::min);
-        let hi = clean
-            .iter()
-            .map(|r| r.psnr_db)
-            .fold(f64::NEG_INFINITY, f64::max);
-        t += &format!(
-            "clean frames {}: cube PSNR mean {:.2} dB (min {lo:.2}, max {hi:.2}), SSIM {:.4}, SAM {}°; reconstruction {:.4} s/frame\n",
-            clean.len(),
-            mean(|r| r.psnr_db),
-            mean(|r| r.ssim),
-            mean_sam(&clean),
-            mean(|r| r.reconstruction_s)
-        );
-    }
-    t
-}
-
-/// The mean SAM over frames where it is defined ("undefined" when it is nowhere).
-fn mean_sam(frames: &[&RehearsedFrame]) -> String {
-    let v: Vec<f64> = frames.iter().filter_map(|r| r.sam_deg).collect();
-    specmux_core::metrics::show(
-        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64),
-        2,
+/// The one-line error of a run that stopped early, after its files are written.
+fn stopped_early(command: &str, outcome: &Outcome, out: &Path) -> Error {
+    let why = outcome
+        .stopped_because
+        .clone()
+        .unwrap_or_else(|| "stopped by the operator".into());
+    let n = outcome.frames.len();
+    Error::device(
+        command,
+        format!("{why}; {n} frames kept in {}", out.display()),
     )
 }
 
-fn outcome_text(o: &Outcome, virtual_s: f64, wall_s: f64) -> String {
+/// What a run did; `virtual_s` is the simulated rig's clock (None on the real rig).
+fn outcome_text(o: &Outcome, virtual_s: Option<f64>, wall_s: f64) -> String {
     let mut t = String::new();
     let flagged = o.frames.iter().filter(|r| !r.ok()).count();
     say!(
@@ -290,16 +242,33 @@ fn outcome_text(o: &Outcome, virtual_s: f64, wall_s: f64) -> String {
         ),
         None => say!(t, "completed; devices stopped camera → DMD → wheel"),
     }
-    say!(t, "virtual time {virtual_s:.3} s, wall time {wall_s:.2} s");
+    match virtual_s {
+        Some(v) => say!(t, "virtual time {v:.3} s, wall time {wall_s:.2} s"),
+        None => say!(t, "wall time {wall_s:.2} s"),
+    }
     t
+}
+
+/// A progress bar of `frames` frames on stderr, drawn only when stderr is a terminal (stdout
+/// stays the report).
+fn frame_bar(frames: usize) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(frames as u64);
+    let style = ProgressStyle::with_template(
+        "frames [{bar:40}] {pos}/{len} {elapsed_precise} (eta {eta}) — Ctrl-C stops safely",
+    )
+    .unwrap_or_else(|_| ProgressStyle::default_bar())
+    .progress_chars("=> ");
+    bar.set_style(style);
+    bar
 }
 
 /// A recorder that also shows progress and honours Ctrl-C.
 struct Acquisition {
     recorder: Recorder,
-    frames: usize,
-    done: usize,
-    progress: bool,
+    bar: ProgressBar,
 }
 
 impl Sink for Acquisition {
@@ -309,10 +278,7 @@ impl Sink for Acquisition {
 
     fn frame(&mut self, r: &FrameRecord, frame: &Frame) -> Result<()> {
         self.recorder.frame(r, frame)?;
-        self.done += 1;
-        if self.progress {
-            eprint!("\rframe {}/{}", self.done, self.frames);
-        }
+        self.bar.inc(1);
         Ok(())
     }
 
@@ -322,65 +288,74 @@ impl Sink for Acquisition {
 }
 
 /// `specmux acquire`: the same plan on the simulated devices (`sim`) or the real ones
-/// (`real`), writing the same files. An acquisition that stops early is an error, after its
-/// files are written.
+/// (`real`, opened from `real`), writing the same files. An acquisition that stops early is an
+/// error, after its files are written.
 pub fn acquire(
     backend: &str,
     o: &RunOptions,
+    real: &RealRigArgs,
     lib: &Library,
 ) -> std::result::Result<String, String> {
-    acquire_in(backend, o, &o.out_or("out/acquire"), lib).map_err(|e| e.to_string())
+    acquire_in(backend, o, real, &o.out_or("out/acquire"), lib).map_err(|e| e.to_string())
 }
 
-fn acquire_in(backend: &str, o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
+fn acquire_in(
+    backend: &str,
+    o: &RunOptions,
+    real: &RealRigArgs,
+    out: &Path,
+    lib: &Library,
+) -> Result<String> {
     let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
-    if backend != "sim" {
-        return Err(Error::refused("--backend", backend, real_backends_note()));
-    }
-    let (plan, text) = sim_plan(&exp, frames, out);
+    let faults = faults(&o.faults)?;
+    // The real rig is opened (inquiries only) even for a dry run: the plan needs its limits.
+    let (real_devices, limits) = match backend {
+        "sim" => (None, DeviceLimits::of_twin(&exp)),
+        "real" if !faults.0.is_empty() => {
+            return Err(Error::refused(
+                "--fault",
+                &o.faults[0],
+                "faults are injected in the simulated rig only",
+            ))
+        }
+        "real" => {
+            let (d, l) = crate::real::open_rig(real, &exp)?;
+            (Some(d), l)
+        }
+        other => return Err(Error::refused("--backend", other, "`sim` or `real`")),
+    };
+    let (plan, text) = plan_for(&exp, frames, &limits, out);
     if dry {
         return Ok(dry_run(&plan, text));
     }
     plan.verify()?;
     let wall = Instant::now();
-    let (sim, _) = SimRig::new(&exp, lib, faults(&o.faults)?)?;
-    let mut dev = sim.devices();
-    let progress = std::io::stderr().is_terminal();
+    let (mut dev, sim) = match real_devices {
+        Some(d) => (d, None),
+        None => {
+            let (sim, _) = SimRig::new(&exp, lib, faults)?;
+            (sim.devices(), Some(sim))
+        }
+    };
     let mut sink = Acquisition {
-        recorder: Recorder::create(out, &plan)?,
-        frames,
-        done: 0,
-        progress,
+        recorder: Recorder::create(out, &plan, &exp)?,
+        bar: frame_bar(frames),
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
-    sink.recorder.finish(&outcome, &sim.events())?;
-    if progress {
-        eprintln!();
-    }
+    let events = sim.as_ref().map_or_else(|| dev.events(), |s| s.events());
+    sink.recorder.finish(&outcome, &events)?;
+    sink.bar.finish_and_clear();
     if !outcome.completed {
-        let why = outcome
-            .stopped_because
-            .clone()
-            .unwrap_or_else(|| "stopped by the operator".into());
-        return Err(Error::device(
-            "acquire",
-            format!(
-                "{why}; {} frames kept in {}",
-                outcome.frames.len(),
-                out.display()
-            ),
-        ));
+        return Err(stopped_early("acquire", &outcome, out));
     }
     let mut text = text;
-    text += &outcome_text(&outcome, sim.now_s(), wall.elapsed().as_secs_f64());
+    text += &outcome_text(
+        &outcome,
+        sim.map(|s| s.now_s()),
+        wall.elapsed().as_secs_f64(),
+    );
     say!(text, "wrote {}", out.display());
     Ok(text)
-}
-
-/// Why `--backend real` is refused in this build.
-fn real_backends_note() -> &'static str {
-    "only `sim` runs a whole rig: the serial wheel (feature serial-wheel) and ALP-4 DMD (feature alp4) backends exist, \
-     a GenICam camera backend does not yet (docs/controller.md, \"Running the rig for real\")"
 }
 
 /// The plan of `rehearse` and `acquire`.

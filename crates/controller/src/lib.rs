@@ -13,6 +13,7 @@ pub mod ome;
 pub mod patterns;
 pub mod plan;
 pub mod real;
+pub mod reconstruct;
 pub mod record;
 pub mod run;
 pub mod sim;

@@ -7,7 +7,8 @@
 //!   with each frame, so an interrupted run keeps every frame's record;
 //! - `calibration.ome.tif` — the dark, flat and pattern captures (float32 means) the
 //!   reconstruction of these frames must use;
-//! - `plan.json` at the start; `events.jsonl` (every device's log) and `acquisition.json` (the
+//! - `plan.json` and `experiment.json` (the experiment as run, so the recording is reconstructed
+//!   with the rig it was taken on) at the start; `events.jsonl` (every device's log) and `acquisition.json` (the
 //!   outcome and its incidents) at the end.
 
 use crate::devices::Frame;
@@ -18,6 +19,7 @@ use crate::plan::Plan;
 use crate::run::{FrameRecord, Outcome, Sink};
 use specmux_core::calibration::CalibrationFrames;
 use specmux_core::Cube;
+use specmux_twin::Experiment;
 use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -42,10 +44,11 @@ fn json_err(path: &Path, e: serde_json::Error) -> Error {
 }
 
 impl Recorder {
-    /// Create the folder and its files; write the plan.
-    pub fn create(dir: &Path, plan: &Plan) -> Result<Recorder> {
+    /// Create the folder and its files; write the plan and the experiment.
+    pub fn create(dir: &Path, plan: &Plan, exp: &Experiment) -> Result<Recorder> {
         std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
         specmux_io::json::write_json(&dir.join("plan.json"), plan)?;
+        specmux_io::json::write_json(&dir.join("experiment.json"), exp)?;
         let s = &plan.settings;
         let path = dir.join("frames.ome.tif");
         let frames = TiffWriter::create(&path, s.width, s.height, Sample::U16, XML_RESERVE)?;

@@ -4,6 +4,7 @@ mod common;
 
 use specmux_controller::commands::{acquire, rehearse, RunOptions};
 use specmux_controller::ome;
+use specmux_controller::real::RealRigArgs;
 use std::path::PathBuf;
 
 fn setup(name: &str, scene: &str) -> (PathBuf, PathBuf) {
@@ -84,7 +85,8 @@ fn rehearsing_a_moving_scene_reconstructs_every_frame() {
 fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
     let (file, out) = setup("acquire", "");
     let o = RunOptions::new(file, 2, false, vec![], Some(out.clone()));
-    let text = acquire("sim", &o, &common::lib()).unwrap();
+    let none = RealRigArgs::default();
+    let text = acquire("sim", &o, &none, &common::lib()).unwrap();
     assert!(text.contains("completed"), "{text}");
     for f in [
         "plan.json",
@@ -97,14 +99,24 @@ fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
     ] {
         assert!(out.join(f).exists(), "{f}");
     }
-    let err = acquire("real", &o, &common::lib()).unwrap_err();
+    // The real rig without its devices: one line naming each one missing, never a panic.
+    let err = acquire("real", &o, &none, &common::lib()).unwrap_err();
     assert!(err.starts_with("plan refused: `--backend` = real"), "{err}");
+    for device in ["wheel: ", "DMD: ", "camera: "] {
+        assert!(err.contains(device) && !err.contains('\n'), "{err}");
+    }
+    let err = acquire("laser", &o, &none, &common::lib()).unwrap_err();
+    assert!(
+        err.starts_with("plan refused: `--backend` = laser"),
+        "{err}"
+    );
     let err = acquire(
         "sim",
         &RunOptions {
             faults: vec!["camera-stops@1".into()],
             ..o
         },
+        &none,
         &common::lib(),
     )
     .unwrap_err();
@@ -136,4 +148,45 @@ fn only_the_shaded_objects_can_move_and_at_a_finite_speed() {
     .unwrap()
     .scene
     .moves());
+}
+
+#[test]
+fn a_rehearsal_folder_reconstructs_to_the_errors_the_rehearsal_reported() {
+    use specmux_controller::reconstruct::reconstruct_recording;
+    let (file, rec) = setup("replay", "velocity_px_per_s = [200, 0]");
+    let o = RunOptions::new(file, 3, false, vec![], Some(rec.clone()));
+    rehearse(&o, &common::lib()).unwrap();
+    let out = rec.with_file_name("replay-out");
+    let text = reconstruct_recording(&rec, &out, &common::lib()).unwrap();
+    assert!(text.contains("3 frames reconstructed"), "{text}");
+    let read = |p: PathBuf| -> Vec<serde_json::Value> {
+        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+    };
+    let (rehearsed, replayed) = (
+        read(rec.join("rehearsal.json")),
+        read(out.join("reconstruct.json")),
+    );
+    assert_eq!(replayed.len(), 3);
+    for (a, b) in rehearsed.iter().zip(&replayed) {
+        assert_eq!(a["frame_id"], b["frame_id"]);
+        // The same frames, calibration and rig: the same cube, to the last bit.
+        for k in ["psnr_db", "ssim", "sam_deg"] {
+            assert_eq!(a[k], b[k], "{k}: {a} vs {b}");
+        }
+        assert!(b["psnr_db"].as_f64().unwrap() > 15.0, "{b}");
+        let id = b["frame_id"].as_u64().unwrap();
+        let (cube, names) = specmux_io::exr::read(&out.join(format!("cube-{id:06}.exr"))).unwrap();
+        assert_eq!(
+            (cube.width, cube.height, cube.planes),
+            (64, 64, names.len())
+        );
+    }
+    // Without the truths (an acquisition), frames are reconstructed and no error is claimed.
+    std::fs::remove_file(rec.join("truth.json")).unwrap();
+    let text = reconstruct_recording(&rec, &out, &common::lib()).unwrap();
+    assert!(text.contains("no truth in this recording"), "{text}");
+    assert!(read(out.join("reconstruct.json"))
+        .iter()
+        .all(|r| r["psnr_db"].is_null()));
+    std::fs::remove_dir_all(rec.parent().unwrap()).unwrap();
 }

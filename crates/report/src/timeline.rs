@@ -2,7 +2,6 @@
 //! exposure window, zoomed on the exposure's start and end, with the weight matrix and warnings.
 
 use plotters::prelude::*;
-use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_twin::timing::TimingConfig;
 use specmux_twin::timing::{weights, Schedule, TimingWeights};
@@ -17,24 +16,13 @@ fn colour(i: usize, n: usize) -> HSLColor {
     HSLColor(i as f64 / n as f64, 0.65, 0.55)
 }
 
-fn plot_error(path: &Path, e: impl std::fmt::Display) -> Error {
-    Error::Image {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
-    }
-}
-
 /// Write the timeline PNG of one exposure of `cfg` to `path` (atomically).
 pub fn timeline_png(cfg: &TimingConfig, path: &Path) -> Result<()> {
     let tw = weights(cfg)?;
     let s = Schedule::new(cfg);
-    crate::plot::register_font(path)?;
     let text_lines = 3 + s.n + tw.warnings.len();
     let height = PANELS_HEIGHT + LINE * text_lines as u32 + 20;
-    let mut buf = vec![255u8; (WIDTH * height * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (WIDTH, height)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| plot_error(path, e))?;
+    crate::plot::render_png(path, (WIDTH, height), |root| {
         let (top, bottom) = root.split_vertically(PANELS_HEIGHT);
         let (t0, t) = (cfg.camera.start_s, cfg.camera.exposure_s);
         let p = s.period;
@@ -56,20 +44,13 @@ pub fn timeline_png(cfg: &TimingConfig, path: &Path) -> Result<()> {
         };
         let panels = top.split_evenly((1, windows.len()));
         for (area, (title, a, b)) in panels.iter().zip(windows) {
-            draw_panel(area, &s, title, a, b, t0, t0 + t).map_err(|e| plot_error(path, e))?;
+            draw_panel(area, &s, title, a, b, t0, t0 + t).map_err(|e| e.to_string())?;
         }
-        draw_text(&bottom, cfg, &tw).map_err(|e| plot_error(path, e))?;
-        root.present().map_err(|e| plot_error(path, e))?;
-    }
-    let img = image::RgbImage::from_raw(WIDTH, height, buf)
-        .ok_or_else(|| plot_error(path, "buffer size"))?;
-    let mut png = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
-        .map_err(|e| plot_error(path, e))?;
-    specmux_io::atomic::write_bytes(path, &png)
+        draw_text(&bottom, cfg, &tw).map_err(|e| e.to_string())
+    })
 }
 
-type Area<'a> = DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>;
+type Area<'a> = crate::plot::Canvas<'a>;
 
 /// One zoom window: lanes (top to bottom) wheel segment fractions, pattern shown, exposure.
 fn draw_panel(

@@ -228,9 +228,15 @@ impl SimRig {
     /// The true cube in front of the camera during `frame` (the scene at the exposure's
     /// mid-time), for the rehearsal's error figures.
     pub fn truth(&self, frame: &Frame) -> Result<Cube> {
+        self.bench.borrow().light.truth_at(self.scene_time_s(frame))
+    }
+
+    /// The scene's time at `frame`'s mid-exposure (seconds since the scene was placed): the
+    /// twin's scene at that time is the frame's truth (`scene::build_at`).
+    pub fn scene_time_s(&self, frame: &Frame) -> f64 {
         let b = self.bench.borrow();
         let mid = frame.timestamp_ns + ns(frame.exposure_s / 2.0);
-        b.light.truth_at(secs(mid.saturating_sub(b.scene_since)))
+        secs(mid.saturating_sub(b.scene_since))
     }
 
     /// Every event of every device, in order.

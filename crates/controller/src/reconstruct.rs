@@ -1,0 +1,253 @@
+//! Reconstructing recorded frames with the calibration acquired in the same recording: each
+//! frame as it arrives during a rehearsal, and a whole recording folder afterwards
+//! (`specmux reconstruct DIR`). The error against the truth is reported only where the
+//! recording holds one: a rehearsal's `truth.json` names, per frame, the time of the
+//! experiment's scene that was in front of the camera (the twin rebuilds it; storing the cubes
+//! would take 8 MB a frame at 256 × 256 × 31 bands).
+
+use crate::error::{Error, Result};
+use crate::ome;
+use crate::record;
+use serde::{Deserialize, Serialize};
+use specmux_core::calibration::Calibration;
+use specmux_core::metrics;
+use specmux_core::reconstructor::Reconstructor;
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
+use specmux_io::exr;
+use specmux_io::output_set::OutputSet;
+use specmux_twin::scene::{build_at, Materials};
+use specmux_twin::{Experiment, Rig};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// One reconstructed frame: its time, flags, reconstruction time and, with a truth, its error.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReconstructedFrame {
+    pub frame_id: u64,
+    pub timestamp_s: f64,
+    pub flags: usize,
+    pub psnr_db: Option<f64>,
+    pub ssim: Option<f64>,
+    pub sam_deg: Option<f64>,
+    pub reconstruction_s: f64,
+}
+
+/// A recorded frame: id, time, number of flags, raw DN.
+pub struct RecordedFrame {
+    pub frame_id: u64,
+    pub timestamp_s: f64,
+    pub flags: usize,
+    pub raw: Cube,
+}
+
+/// Reconstruct one frame, timed, and compare it with `truth` when there is one.
+pub fn reconstruct_frame(
+    recon: &Reconstructor,
+    f: &RecordedFrame,
+    truth: Option<&Cube>,
+) -> Result<(Cube, ReconstructedFrame)> {
+    let t = Instant::now();
+    let cube = recon.run(&f.raw, None)?.cube;
+    let reconstruction_s = t.elapsed().as_secs_f64();
+    let m = truth.map(|t| metrics::compare(t, &cube)).transpose()?;
+    let row = ReconstructedFrame {
+        frame_id: f.frame_id,
+        timestamp_s: f.timestamp_s,
+        flags: f.flags,
+        psnr_db: m.as_ref().map(|m| m.psnr_db),
+        ssim: m.as_ref().map(|m| m.ssim),
+        sam_deg: m.and_then(|m| m.sam_deg),
+        reconstruction_s,
+    };
+    Ok((cube, row))
+}
+
+/// When a frame's truth was in front of the camera: the experiment's scene at `scene_t_s`
+/// (seconds since it was placed, at the frame's mid-exposure).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TruthTime {
+    pub frame_id: u64,
+    pub scene_t_s: f64,
+}
+
+const TRUTH_FILE: &str = "truth.json";
+
+/// Write a rehearsal's `truth.json`.
+pub fn write_truth_times(dir: &Path, times: &[TruthTime]) -> Result<()> {
+    Ok(specmux_io::json::write_json(&dir.join(TRUTH_FILE), &times)?)
+}
+
+/// The truths of a recording, by frame id: none without `truth.json` (a real acquisition).
+struct Truths {
+    times: Vec<TruthTime>,
+    materials: Materials,
+}
+
+impl Truths {
+    fn read(dir: &Path, lib: &Library) -> Result<Option<Truths>> {
+        let path = dir.join(TRUTH_FILE);
+        if !path.exists() {
+            return Ok(None);
+        }
+        Ok(Some(Truths {
+            times: read_json(&path)?,
+            materials: Materials::load(lib)?,
+        }))
+    }
+
+    /// The scene of frame `id`; None where the rehearsal recorded no time for it.
+    fn of(&self, exp: &Experiment, id: u64) -> Result<Option<Cube>> {
+        let Some(t) = self.times.iter().find(|t| t.frame_id == id) else {
+            return Ok(None);
+        };
+        let scene = build_at(&exp.scene, &exp.file, &self.materials, t.scene_t_s)?;
+        Ok(Some(scene.cube))
+    }
+}
+
+/// The band names of an experiment's cubes.
+pub fn band_names(exp: &Experiment) -> Result<Vec<String>> {
+    let grid = exp.scene.grid(&exp.file)?;
+    Ok(grid.wavelengths().into_iter().map(exr::band_name).collect())
+}
+
+/// The table of per-frame results, with a summary line of the clean frames.
+pub fn frame_table(rows: &[ReconstructedFrame]) -> String {
+    let show = |v: Option<f64>, p: usize| metrics::show(v, p);
+    let mut t = format!(
+        "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9}\n",
+        "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s"
+    );
+    for r in rows {
+        t += &format!(
+            "{:>6} {:>10.6} {:>6} {:>9} {:>7} {:>9} {:>9.4}\n",
+            r.frame_id,
+            r.timestamp_s,
+            r.flags,
+            show(r.psnr_db, 2),
+            show(r.ssim, 4),
+            show(r.sam_deg, 2),
+            r.reconstruction_s
+        );
+    }
+    let clean: Vec<&ReconstructedFrame> = rows.iter().filter(|r| r.flags == 0).collect();
+    if clean.is_empty() {
+        return t;
+    }
+    let mean = |v: Vec<f64>| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+    let psnr: Vec<f64> = clean.iter().filter_map(|r| r.psnr_db).collect();
+    let time = mean(clean.iter().map(|r| r.reconstruction_s).collect()).unwrap_or(0.0);
+    t += &format!("clean frames {}: ", clean.len());
+    if psnr.is_empty() {
+        t += "no truth in this recording; ";
+    } else {
+        let (lo, hi) = psnr
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            });
+        t += &format!(
+            "cube PSNR mean {} dB (min {lo:.2}, max {hi:.2}), SSIM {}, SAM {}°; ",
+            show(mean(psnr.clone()), 2),
+            show(mean(clean.iter().filter_map(|r| r.ssim).collect()), 4),
+            show(mean(clean.iter().filter_map(|r| r.sam_deg).collect()), 2),
+        );
+    }
+    t += &format!("reconstruction {time:.4} s/frame\n");
+    t
+}
+
+/// `specmux reconstruct DIR` for a recording folder: every frame reconstructed with the
+/// calibration acquired in that recording; cubes and `reconstruct.json` written to `out`.
+pub fn reconstruct_recording(
+    dir: &Path,
+    out: &Path,
+    lib: &Library,
+) -> std::result::Result<String, String> {
+    reconstruct_in(dir, out, lib).map_err(|e| e.to_string())
+}
+
+fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
+    let exp = recorded_experiment(dir)?;
+    let rig = Rig::build(&exp, lib, &Materials::load(lib)?)?;
+    let frames_cal = record::read_calibration(dir)?;
+    let cal = Calibration::from_frames(&rig.carriers, &frames_cal, exp.calibration.search_bins)?;
+    let recon = Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)?;
+    let frames = recorded_frames(dir)?;
+    let truths = Truths::read(dir, lib)?;
+    let names = band_names(&exp)?;
+    let files = OutputSet::begin(out)?;
+    let mut rows = Vec::new();
+    for f in &frames {
+        let truth = match &truths {
+            Some(t) => t.of(&exp, f.frame_id)?,
+            None => None,
+        };
+        let (cube, row) = reconstruct_frame(&recon, f, truth.as_ref())?;
+        exr::write(
+            &files.path(&format!("cube-{:06}.exr", f.frame_id)),
+            &cube,
+            &names,
+        )?;
+        rows.push(row);
+    }
+    specmux_io::json::write_json(&files.path("reconstruct.json"), &rows)?;
+    let mut text = format!(
+        "{}: {} frames reconstructed with its own calibration ({})\n",
+        dir.display(),
+        rows.len(),
+        dir.join("calibration.ome.tif").display()
+    );
+    text += &frame_table(&rows);
+    for note in files.commit()? {
+        text += &format!("{note}\n");
+    }
+    text += &format!("wrote {}\n", out.display());
+    Ok(text)
+}
+
+/// The experiment a recording was taken with (`experiment.json`); its file name from the plan,
+/// so that paths in it resolve as they did for the run.
+fn recorded_experiment(dir: &Path) -> Result<Experiment> {
+    let mut exp: Experiment = read_json(&dir.join("experiment.json"))?;
+    let plan: serde_json::Value = read_json(&dir.join("plan.json"))?;
+    exp.file = plan["experiment"].as_str().unwrap_or_default().to_string();
+    exp.validate()?;
+    Ok(exp)
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| Error::io(path, std::io::Error::other(e)))
+}
+
+/// The frames of `frames.ome.tif` with their records (`frames.jsonl`, one line per frame);
+/// an interrupted recording gives its complete prefix.
+fn recorded_frames(dir: &Path) -> Result<Vec<RecordedFrame>> {
+    let (_, pages) = ome::read(&dir.join("frames.ome.tif"))?;
+    let jpath: PathBuf = dir.join("frames.jsonl");
+    let text = std::fs::read_to_string(&jpath).map_err(|e| Error::io(&jpath, e))?;
+    let bad = |n: usize, why: String| {
+        Error::device("recording", format!("{} line {n}: {why}", jpath.display()))
+    };
+    text.lines()
+        .zip(pages)
+        .enumerate()
+        .map(|(n, (line, page))| {
+            let v: serde_json::Value =
+                serde_json::from_str(line).map_err(|e| bad(n + 1, e.to_string()))?;
+            let field = |k: &str| v.get(k).ok_or_else(|| bad(n + 1, format!("no `{k}`")));
+            Ok(RecordedFrame {
+                frame_id: field("frame_id")?
+                    .as_u64()
+                    .ok_or_else(|| bad(n + 1, "`frame_id` is not a count".into()))?,
+                timestamp_s: field("timestamp_s")?
+                    .as_f64()
+                    .ok_or_else(|| bad(n + 1, "`timestamp_s` is not a number".into()))?,
+                flags: field("flags")?.as_array().map_or(0, Vec::len),
+                raw: Cube::from_vec(page.width, page.height, 1, page.data)?,
+            })
+        })
+        .collect()
+}
