@@ -23,6 +23,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "core",
         &[
             &["error"],
+            &["interrupt"],
             &["cube", "spectral"],
             &["fft"],
             &["carriers"],
@@ -69,7 +70,6 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         &[
             &["error"],
             &["log"],
-            &["signal"],
             &["devices"],
             &["plan"],
             &["patterns"],
