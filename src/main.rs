@@ -15,7 +15,8 @@ use std::process::ExitCode;
     about = "Digital twin of a Fourier-spectral-multiplexing snapshot hyperspectral camera"
 )]
 struct Cli {
-    /// Folder of spectral CSV curves (default: $SPECMUX_SPECTRA or the source tree's spectra/).
+    /// Folder of spectral CSV curves (default: $SPECMUX_SPECTRA, else the library embedded in
+    /// this binary).
     #[arg(long, global = true)]
     spectra: Option<PathBuf>,
     #[command(subcommand)]
@@ -35,15 +36,23 @@ enum Command {
         size: Option<usize>,
         #[arg(long, default_value = "out/demo")]
         out: PathBuf,
+        /// Also write every EXR as NumPy .npy (float32; a cube as bands × height × width).
+        #[arg(long)]
+        npy: bool,
     },
-    /// Simulate the frame the camera would record for an experiment.
+    /// Simulate the frame the camera would record for an experiment, the true cube and the
+    /// calibration frames (calibration/: what `reconstruct --calibration` reads).
     Simulate {
-        experiment: PathBuf,
+        /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
+        experiment: String,
         /// Print the stages that would run, and run nothing.
         #[arg(long)]
         explain: bool,
         #[arg(long, default_value = "out/simulate")]
         out: PathBuf,
+        /// Also write every EXR as NumPy .npy.
+        #[arg(long)]
+        npy: bool,
     },
     /// Work–precision study: simulate the frame once, reconstruct it with Fourier, GAP and GAP-TV
     /// over a grid of iterations, crops and window shapes; table (stdout, JSON, Markdown) and a
@@ -130,17 +139,26 @@ enum Command {
         #[command(subcommand)]
         what: specmux_design::DesignCommand,
     },
-    /// Reconstruct a cube from a frame (EXR, one channel) with an experiment's rig, or every
-    /// frame of a recording folder (`acquire`/`rehearse`) with the calibration acquired in it.
+    /// Reconstruct a cube from a frame (one-channel EXR, or 16-bit PNG of raw DN) with the rig
+    /// of the experiment that recorded it, or every frame of a recording folder
+    /// (`acquire`/`rehearse`) with the calibration acquired in it.
     Reconstruct {
         frame: PathBuf,
+        /// The experiment file (or built-in scene name) whose rig recorded the frame: required.
         #[arg(long)]
-        experiment: Option<PathBuf>,
+        experiment: Option<String>,
+        /// A folder of measured calibration frames: dark.exr, flat.exr, pattern-1.exr … (as
+        /// `simulate` writes them); without it the twin simulates the rig's calibration.
+        #[arg(long)]
+        calibration: Option<PathBuf>,
         /// A truth cube (EXR) to report the error against.
         #[arg(long)]
         truth: Option<PathBuf>,
         #[arg(long, default_value = "out/reconstruct")]
         out: PathBuf,
+        /// Also write the cube as NumPy .npy.
+        #[arg(long)]
+        npy: bool,
     },
     /// Calibrate and acquire on the simulated rig (virtual clock), reconstruct every frame with
     /// the acquired calibration and print its error against the truth (docs/controller.md).
@@ -207,12 +225,18 @@ fn main() -> ExitCode {
 
 fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> {
     let done: Result<String> = match cmd {
-        Command::Demo { scene, size, out } => commands::demo(&scene, size, &out, lib),
+        Command::Demo {
+            scene,
+            size,
+            out,
+            npy,
+        } => commands::demo(&scene, size, &out, npy, lib),
         Command::Simulate {
             experiment,
             explain,
             out,
-        } => commands::simulate(&experiment, explain, &out, lib),
+            npy,
+        } => commands::simulate(&experiment, explain, &out, npy, lib),
         Command::Bench {
             experiment,
             out,
@@ -251,19 +275,31 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             frame,
             out,
             experiment,
+            calibration,
             truth,
+            npy,
         } if frame.is_dir() => {
-            if experiment.is_some() || truth.is_some() {
-                return Err(format!("{}: a recording brings its own experiment and truths; --experiment and --truth are for one frame", frame.display()));
+            if experiment.is_some() || calibration.is_some() || truth.is_some() || npy {
+                return Err(format!("{}: a recording brings its own experiment, calibration and truths; --experiment, --calibration, --truth and --npy are for one frame", frame.display()));
             }
             return specmux_controller::reconstruct::reconstruct_recording(&frame, &out, lib);
         }
         Command::Reconstruct {
             frame,
             experiment,
+            calibration,
             truth,
             out,
-        } => commands::reconstruct(&frame, experiment.as_deref(), truth.as_deref(), &out, lib),
+            npy,
+        } => commands::reconstruct(
+            &frame,
+            experiment.as_deref(),
+            calibration.as_deref(),
+            truth.as_deref(),
+            &out,
+            npy,
+            lib,
+        ),
         Command::Rehearse(a) => return controller::rehearse(&a.into(), lib),
         Command::Acquire { run, backend, real } => {
             return controller::acquire(&backend, &run.into(), &real, lib)

@@ -36,7 +36,14 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["metrics"],
         ],
     ),
-    ("io", &[&["atomic"], &["exr", "png", "json", "output_set"]]),
+    (
+        "io",
+        &[
+            &["atomic"],
+            &["exr", "png", "json", "output_set", "npy"],
+            &["frame"],
+        ],
+    ),
     (
         "twin",
         // The light path, then the calibration captures made with it; experiment composes the

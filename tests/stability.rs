@@ -662,6 +662,8 @@ fn cli_a_raw_frame_with_nan_is_refused() {
     let out = specmux(&[
         "reconstruct",
         f.to_str().unwrap(),
+        "--experiment",
+        "dead-leaves",
         "--out",
         d.join("out").to_str().unwrap(),
     ]);
@@ -695,6 +697,8 @@ fn cli_a_truth_of_the_wrong_size_is_refused_before_anything_is_written() {
     let out = specmux(&[
         "reconstruct",
         f.to_str().unwrap(),
+        "--experiment",
+        "dead-leaves",
         "--truth",
         t.to_str().unwrap(),
         "--out",

@@ -4,7 +4,6 @@
 //! library's `design/` folder, so that an experiment names them like any other curve.
 
 use serde::{Deserialize, Serialize};
-use specmux_core::spectral::csv;
 use specmux_core::spectral::{Curve, Library};
 use specmux_core::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -188,27 +187,19 @@ fn generated(id: &str, what: &str, fam: &Families, t: impl Fn(f64) -> f64) -> Re
     })
 }
 
-/// The transmittance curves under `dir`: every single-curve CSV (searched recursively, sorted)
-/// whose column is named `transmittance` and that this module did not generate. Names are
-/// library names when `dir` lies inside the library, else the absolute path without `.csv`.
-pub fn measured(dir: &Path, lib: &Library) -> Result<Vec<Candidate>> {
-    let mut files = Vec::new();
-    walk(dir, &mut files)?;
-    files.sort();
-    let root = lib.root.canonicalize().unwrap_or_else(|_| lib.root.clone());
+/// The transmittance curves of catalogue `cat` (a folder, or the spectral library itself):
+/// every single-curve table whose column is named `transmittance` and that this module did not
+/// generate, sorted. Names are library names when the catalogue lies inside `lib`, else the
+/// absolute path without `.csv` (which `Library::curve` reads as a file).
+pub fn measured(cat: &Library, lib: &Library) -> Result<Vec<Candidate>> {
     let mut out = Vec::new();
-    for f in files {
-        let t = csv::read(&f)?;
+    for rel in cat.names()? {
+        let t = cat.table(&rel)?;
         let is_filter = t.curves.len() == 1 && t.curves[0].name == "transmittance";
         if !is_filter || t.provenance.starts_with(GENERATED) {
             continue;
         }
-        let abs = f.canonicalize().map_err(|e| Error::io(&f, e))?;
-        let stem = abs.with_extension("");
-        let name = match stem.strip_prefix(&root) {
-            Ok(rel) => rel.to_string_lossy().replace('\\', "/"),
-            Err(_) => stem.to_string_lossy().to_string(),
-        };
+        let name = library_name(cat, lib, &rel)?;
         let c = &t.curves[0];
         let curve = Curve::new(name.clone(), c.wavelengths().to_vec(), c.values().to_vec())?;
         out.push(Candidate {
@@ -220,17 +211,19 @@ pub fn measured(dir: &Path, lib: &Library) -> Result<Vec<Candidate>> {
     Ok(out)
 }
 
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
-    let entries = std::fs::read_dir(dir).map_err(|e| Error::io(dir, e))?;
-    for e in entries {
-        let p = e.map_err(|e| Error::io(dir, e))?.path();
-        if p.is_dir() {
-            walk(&p, out)?;
-        } else if p.extension().is_some_and(|x| x == "csv") {
-            out.push(p);
-        }
-    }
-    Ok(())
+/// The name `lib` knows catalogue entry `rel` by: itself when the catalogue is the library or
+/// lies inside its folder, else the entry's absolute path without `.csv`.
+fn library_name(cat: &Library, lib: &Library, rel: &str) -> Result<String> {
+    let Some(dir) = cat.root() else {
+        return Ok(rel.to_string());
+    };
+    let dir = dir.canonicalize().map_err(|e| Error::io(dir, e))?;
+    let abs = dir.join(rel);
+    let inside = lib
+        .root()
+        .and_then(|r| r.canonicalize().ok())
+        .and_then(|r| abs.strip_prefix(r).ok().map(Path::to_path_buf));
+    Ok(inside.unwrap_or(abs).to_string_lossy().replace('\\', "/"))
 }
 
 /// Write each generated candidate of `chosen` as `<library>/<name>.csv` (the spectral CSV
@@ -245,6 +238,10 @@ pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathB
         for (l, v) in c.curve.wavelengths().iter().zip(c.curve.values()) {
             text += &format!("{l:.1},{v:.6}\n");
         }
+        if lib.root().is_none() {
+            let why = "the embedded spectral library is read-only: pass --spectra DIR (a copy of spectra/) to keep generated filters";
+            return Err(Error::config("--spectra", "spectra", lib.provenance(), why));
+        }
         let path = lib.path(&c.name);
         specmux_io::atomic::write_bytes(&path, text.as_bytes())?;
         written.push(path);
@@ -252,14 +249,14 @@ pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathB
     Ok(written)
 }
 
-/// The catalogue: the measured curves under `dir` (none when `dir` is None) and the families.
+/// The catalogue: the measured curves of `cat` (none when `cat` is None) and the families.
 pub fn load(
-    dir: Option<&Path>,
+    cat: Option<&Library>,
     families: Option<&Families>,
     lib: &Library,
 ) -> Result<Vec<Candidate>> {
-    let mut all = match dir {
-        Some(d) => measured(d, lib)?,
+    let mut all = match cat {
+        Some(c) => measured(c, lib)?,
         None => Vec::new(),
     };
     if let Some(f) = families {
@@ -275,7 +272,7 @@ mod tests {
     #[test]
     fn the_spectra_folder_gives_the_six_wheel_and_paper_curves_and_families_forty() {
         let lib = Library::default_root();
-        let m = measured(&lib.root, &lib).unwrap();
+        let m = measured(&lib, &lib).unwrap();
         let names: Vec<&str> = m.iter().map(|c| c.name.as_str()).collect();
         assert!(
             names.contains(&"wheel/red") && names.contains(&"paper/c"),
@@ -290,7 +287,7 @@ mod tests {
         write_generated(&[&g[3]], &tmp).unwrap();
         let back = tmp.curve(&g[3].name).unwrap();
         assert!((back.eval(537.0) - g[3].curve.eval(537.0)).abs() < 1e-6);
-        assert!(measured(&dir, &tmp).unwrap().is_empty());
+        assert!(measured(&tmp, &tmp).unwrap().is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

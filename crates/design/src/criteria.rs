@@ -309,7 +309,7 @@ pub(crate) mod tests {
     /// An evaluator on the catalogue of `spectra/` (six curves) plus a few generated ones.
     pub(crate) fn evaluator(extra: usize) -> (Evaluator, Vec<String>) {
         let lib = Library::default_root();
-        let mut cat = crate::catalog::measured(&lib.root, &lib).unwrap();
+        let mut cat = crate::catalog::measured(&lib, &lib).unwrap();
         cat.extend(
             crate::catalog::Families::default()
                 .generate("t")

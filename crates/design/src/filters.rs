@@ -112,7 +112,7 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
         (Some(p), false) => Some(Families::load(p)?),
         (None, false) => Some(Families::default()),
     };
-    let dir = a.catalog.clone().unwrap_or_else(|| lib.root.clone());
+    let dir = a.catalog.clone().map_or_else(|| lib.clone(), Library::new);
     let cat = catalog::load(Some(&dir), fam.as_ref(), lib)?;
     if !(1..=16).contains(&a.choose) || a.choose > cat.len() {
         let why = format!(
@@ -140,7 +140,7 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
     if let Some(i) = (0..cat.len()).find(|&i| !(w_raw.row(i).sum() > 0.0)) {
         let why = "passes no light on the band grid with this light and camera";
         return Err(Error::config(
-            &dir.display().to_string(),
+            &dir.provenance(),
             "catalogue",
             &cat[i].name,
             why,

@@ -64,6 +64,21 @@ pub fn read(path: &Path) -> Result<(Cube, Vec<String>)> {
     read_bytes(&bytes, path)
 }
 
+/// Width, height and channel names (in the file's order) of an EXR file's first layer, read
+/// from its header alone.
+pub fn header(path: &Path) -> Result<(usize, usize, Vec<String>)> {
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let err = |msg: String| Error::Exr {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::BufReader::new(file), false)
+        .map_err(|e| err(e.to_string()))?;
+    let h = meta.headers.first().ok_or_else(|| err("no layer".into()))?;
+    let names = h.channels.list.iter().map(|c| c.name.to_string()).collect();
+    Ok((h.layer_size.width(), h.layer_size.height(), names))
+}
+
 /// The most f32 samples (width × height × channels, over all layers) a file may declare: 1 GiB
 /// of data, 4× an 8192 × 8192 × 4 frame and 13× the prototype's 768 × 768 × 31 cube. A header
 /// that claims more is refused before anything is allocated for it.

@@ -1,8 +1,11 @@
 //! specmux-io: the file formats specmux reads and writes — EXR cubes and frames, PNG images,
-//! JSON reports — each file written atomically (a temporary beside it, then a rename).
+//! NumPy arrays, JSON reports, camera and calibration frames a user brings — each file written
+//! atomically (a temporary beside it, then a rename).
 
 pub mod atomic;
 pub mod exr;
+pub mod frame;
 pub mod json;
+pub mod npy;
 pub mod output_set;
 pub mod png;

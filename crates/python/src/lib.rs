@@ -332,11 +332,11 @@ fn metrics<'py>(
     py.import("json")?.call_method1("loads", (text,))
 }
 
-/// The spectral library this module uses by default (`$SPECMUX_SPECTRA`, else the source
-/// tree's `spectra/` folder at build time).
+/// The folder of the spectral library this module uses by default (`$SPECMUX_SPECTRA`), or
+/// None for the copy of `spectra/` embedded in the module at build time.
 #[pyfunction]
-fn spectra_root() -> PathBuf {
-    Library::default_root().root
+fn spectra_root() -> Option<PathBuf> {
+    Library::default_root().root().map(PathBuf::from)
 }
 
 #[pymodule]

@@ -1,11 +1,14 @@
 //! One function per CLI command: run the library, write the files, return the text to print.
 
+use specmux_core::calibration::Calibration;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::{Grid, Library};
 use specmux_core::unmix::UnmixStats;
+use specmux_core::wavelet::Dwt2;
 use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
+use specmux_twin::captures::CalibrationSource;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::run::{self, RunData, RunReport};
 use std::path::Path;
@@ -27,24 +30,64 @@ fn finish(files: OutputSet, out: &Path, text: &mut String) -> Result<()> {
     Ok(())
 }
 
-/// The experiment a `--scene` names: a built-in scene or a TOML file.
+/// The scenes every command accepts by name, as the prototype rig imaging them.
+pub const BUILT_IN_SCENES: [&str; 3] = ["dead-leaves", "shaded-objects", "bars"];
+
+/// The experiment a command names: a built-in scene or an experiment file; `size` (`--size`)
+/// overrides a procedural scene's square frame size.
 pub fn experiment_for(scene: &str, size: Option<usize>) -> Result<Experiment> {
-    let mut exp = if scene.ends_with(".toml") {
-        Experiment::load(Path::new(scene))?
-    } else {
+    let mut exp = if BUILT_IN_SCENES.contains(&scene) {
         let mut e = Experiment::prototype();
         e.scene.source = scene.to_string();
         e
+    } else if scene.ends_with(".toml") || Path::new(scene).is_file() {
+        Experiment::load(Path::new(scene))?
+    } else {
+        return Err(Error::config(
+            scene,
+            "experiment",
+            format!("\"{scene}\""),
+            "is neither a built-in scene (dead-leaves, shaded-objects, bars) nor an experiment file",
+        ));
     };
     if let Some(n) = size {
-        exp.scene.size = [n, n];
+        resize(&mut exp, n)?;
     }
     exp.validate()?;
     Ok(exp)
 }
 
-fn load(path: &Path) -> Result<Experiment> {
-    Experiment::load(path)
+/// `--size n` on a procedural scene; refused for a cube read from a file, and for a side that
+/// GAP's wavelet cannot split, with the nearest sides that it can.
+fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
+    let refuse = |why: &str| Err(Error::config("--size", "size", n, why));
+    let source = &exp.scene.source;
+    if source.contains(':') {
+        return refuse(&format!("{source} takes its size from the file"));
+    }
+    exp.scene.size = [n, n];
+    let gap = &exp.reconstruct.gap;
+    if gap.method == specmux_core::gap::Method::Fourier {
+        return Ok(());
+    }
+    let fits = |m: usize| Dwt2::new(m, m, gap.levels, gap.wavelet, "").is_ok();
+    if fits(n) {
+        return Ok(());
+    }
+    let near: Vec<String> = [
+        (16..n).rev().find(|&m| fits(m)),
+        (n + 1..=8192).find(|&m| fits(m)),
+    ]
+    .into_iter()
+    .flatten()
+    .map(|m| m.to_string())
+    .collect();
+    refuse(&format!(
+        "GAP's wavelet (reconstruct.gap.levels = {}) splits only sides divisible by {}: try --size {}, or an experiment file with fewer levels or [reconstruct.gap] method = \"fourier\"",
+        gap.levels,
+        1usize << gap.levels,
+        near.join(" or ")
+    ))
 }
 
 /// One frame's cube and unmixing counters on the device `[compute] device` names, with a line
@@ -142,13 +185,35 @@ fn band_names(grid: &Grid) -> Vec<String> {
         .collect()
 }
 
-pub fn demo(scene: &str, size: Option<usize>, out: &Path, lib: &Library) -> Result<String> {
+/// Write `cube` as `<stem>.exr` with channels `names`, and as `<stem>.npy` when `npy`.
+fn write_cube(
+    files: &OutputSet,
+    stem: &str,
+    cube: &Cube,
+    names: &[String],
+    npy: bool,
+) -> Result<()> {
+    exr_io::write(&files.path(&format!("{stem}.exr")), cube, names)?;
+    if npy {
+        specmux_io::npy::write(&files.path(&format!("{stem}.npy")), cube)?;
+    }
+    Ok(())
+}
+
+/// `demo`: run an experiment end to end and write its files (`npy`: .npy beside every EXR).
+pub fn demo(
+    scene: &str,
+    size: Option<usize>,
+    out: &Path,
+    npy: bool,
+    lib: &Library,
+) -> Result<String> {
     let mut text = String::new();
     let exp = experiment_for(scene, size)?;
     let (rep, data) = run::run(&exp, lib)?;
     say!(text, "{}", rep.table());
     let files = OutputSet::begin(out)?;
-    write_run_files(&exp, &rep, &data, &files, lib)?;
+    write_run_files(&exp, &rep, &data, &files, npy, lib)?;
     finish(files, out, &mut text)?;
     Ok(text)
 }
@@ -158,14 +223,15 @@ fn write_run_files(
     rep: &RunReport,
     d: &RunData,
     files: &OutputSet,
+    npy: bool,
     lib: &Library,
 ) -> Result<()> {
     let grid = exp.scene.grid(&exp.file)?;
-    exr_io::write(&files.path("frame.exr"), &d.frame, &["Y".to_string()])?;
+    write_cube(files, "frame", &d.frame, &["Y".to_string()], npy)?;
     specmux_io::png::plane_png(&files.path("frame.png"), &d.frame, 0)?;
-    exr_io::write(&files.path("cube.exr"), &d.cube, &band_names(&grid))?;
+    write_cube(files, "cube", &d.cube, &band_names(&grid), npy)?;
     let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
-    exr_io::write(&files.path("channels.exr"), &d.xhat, &ch)?;
+    write_cube(files, "channels", &d.xhat, &ch, npy)?;
     crate::panel::write_figures(exp, lib, Some(&d.truth), &d.cube, files)?;
     specmux_io::json::write_json(&files.path("report.json"), rep)
 }
@@ -474,9 +540,17 @@ pub fn ptc(scene: Option<&str>, size: usize, emva: bool, out: &Path) -> Result<S
     Ok(text)
 }
 
-pub fn simulate(path: &Path, explain: bool, out: &Path, lib: &Library) -> Result<String> {
+/// `simulate`: the frame the camera would record, the true cube, and the calibration frames
+/// the rig would capture (`calibration/`, the folder `reconstruct --calibration` reads).
+pub fn simulate(
+    scene: &str,
+    explain: bool,
+    out: &Path,
+    npy: bool,
+    lib: &Library,
+) -> Result<String> {
     let mut text = String::new();
-    let exp = load(path)?;
+    let exp = experiment_for(scene, None)?;
     let materials = specmux_twin::scene::Materials::load(lib)?;
     let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
     let pipeline = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?;
@@ -486,14 +560,16 @@ pub fn simulate(path: &Path, explain: bool, out: &Path, lib: &Library) -> Result
     }
     let (sim, times) = pipeline.run()?;
     let files = OutputSet::begin(out)?;
-    exr_io::write(&files.path("frame.exr"), &sim.frame, &["Y".to_string()])?;
+    write_cube(&files, "frame", &sim.frame, &["Y".to_string()], npy)?;
     specmux_io::png::plane_png(&files.path("frame.png"), &sim.frame, 0)?;
     let scene = &sim.scene;
-    exr_io::write(
-        &files.path("truth.exr"),
-        &scene.cube,
-        &band_names(&scene.grid),
-    )?;
+    write_cube(&files, "truth", &scene.cube, &band_names(&scene.grid), npy)?;
+    if exp.calibration.source == CalibrationSource::Captures {
+        let frames = run::calibration_frames(&exp, &rig, &sim)?;
+        let dir = files.path("calibration");
+        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+        specmux_io::frame::write_calibration(&dir, &frames)?;
+    }
     specmux_io::json::write_json(&files.path("simulate.json"), &times)?;
     for t in &times {
         say!(text, "{:<15} {:>8.4} s", t.stage, t.seconds);
@@ -502,19 +578,48 @@ pub fn simulate(path: &Path, explain: bool, out: &Path, lib: &Library) -> Result
     Ok(text)
 }
 
+/// What `reconstruct` reports beside the cube (reconstruct.json; docs/report-schema.md).
+#[derive(serde::Serialize)]
+struct ReconstructReport {
+    #[serde(flatten)]
+    provenance: run::Provenance,
+    frame: String,
+    experiment: String,
+    /// Where the calibration came from: the twin's simulation of the experiment's rig, or the
+    /// measured frames of `--calibration`.
+    calibration: ReconstructCalibration,
+    unmix: UnmixStats,
+    metrics: Option<specmux_core::metrics::Metrics>,
+}
+
+#[derive(serde::Serialize)]
+struct ReconstructCalibration {
+    source: String,
+    carriers: Vec<specmux_core::calibration::MeasuredCarrier>,
+}
+
+/// `reconstruct`: a cube from a camera frame (EXR, or a 16-bit PNG of raw DN) with the rig of
+/// `experiment` (a file or a built-in scene name; required), calibrated from the measured
+/// frames in `calibration` or, without them, from the twin's simulated captures of that rig.
 pub fn reconstruct(
     frame_path: &Path,
-    exp: Option<&Path>,
+    experiment: Option<&str>,
+    calibration: Option<&Path>,
     truth: Option<&Path>,
     out: &Path,
+    npy: bool,
     lib: &Library,
 ) -> Result<String> {
     let mut text = String::new();
-    let mut exp = match exp {
-        Some(p) => load(p)?,
-        None => Experiment::prototype(),
+    let frame_name = frame_path.display().to_string();
+    let Some(experiment) = experiment else {
+        return Err(Error::config(&frame_name, "--experiment", "absent", "a frame is decoded with the rig that recorded it: pass --experiment EXP.toml (the experiment that made the frame) or a built-in scene name such as dead-leaves (the prototype rig)"));
     };
-    let frame = read_frame(frame_path)?;
+    let mut exp = experiment_for(experiment, None)?;
+    let frame = specmux_io::frame::read(frame_path)?;
+    if specmux_io::frame::is_raw_dn(frame_path) && exp.rig.sensor.is_none() {
+        return Err(Error::config(&exp.file, "rig.sensor", "absent", &format!("{frame_name} is a 16-bit PNG of raw DN: the experiment needs its camera ([rig.sensor]) to turn DN into light")));
+    }
     exp.scene.size = [frame.width, frame.height];
     exp.validate()?;
     let grid = exp.scene.grid(&exp.file)?;
@@ -524,9 +629,29 @@ pub fn reconstruct(
         .transpose()?;
     let materials = specmux_twin::scene::Materials::load(lib)?;
     let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
-    // The calibration frames of this rig, as the twin captures them.
-    let (sim, _) = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?.run()?;
-    let recon = run::reconstructor(&exp, &rig, &sim)?;
+    let cal = match calibration {
+        Some(dir) => {
+            let frames = specmux_io::frame::read_calibration(
+                dir,
+                rig.carriers.len(),
+                frame.width,
+                frame.height,
+            )?;
+            Calibration::from_frames(&rig.carriers, &frames, exp.calibration.search_bins)
+                .map_err(|e| e.within(&dir.display().to_string(), "--calibration", "its frames"))?
+        }
+        None => {
+            let (sim, _) = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?.run()?;
+            let mut cal = run::calibration(&exp, &rig, &sim)?;
+            cal.source = format!(
+                "the twin's simulated {} of the experiment's rig (no --calibration)",
+                cal.source
+            );
+            cal
+        }
+    };
+    say!(text, "calibration: {}", cal.source);
+    let recon = Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)?;
     let (cube, stats, times) = reconstruct_on_device(&exp, &recon, &frame)?;
     say!(
         text,
@@ -534,49 +659,41 @@ pub fn reconstruct(
         stats.constrained_pixels
     );
     let files = OutputSet::begin(out)?;
-    exr_io::write(&files.path("cube.exr"), &cube, &band_names(&grid))?;
-    if let Some((tp, tc)) = &truth {
-        let m = specmux_core::metrics::compare(tc, &cube)?;
-        say!(
-            text,
-            "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {}°",
-            tp.display(),
-            m.psnr_db,
-            m.ssim,
-            m.nrmse,
-            specmux_core::metrics::show(m.sam_deg, 2)
-        );
-        for f in &m.flags {
-            say!(text, "warning: {f}");
+    write_cube(&files, "cube", &cube, &band_names(&grid), npy)?;
+    let metrics = match &truth {
+        Some((tp, tc)) => {
+            let m = specmux_core::metrics::compare(tc, &cube)?;
+            say!(
+                text,
+                "against {}: PSNR {:.2} dB, SSIM {:.4}, NRMSE {:.4}, SAM {}°",
+                tp.display(),
+                m.psnr_db,
+                m.ssim,
+                m.nrmse,
+                specmux_core::metrics::show(m.sam_deg, 2)
+            );
+            for f in &m.flags {
+                say!(text, "warning: {f}");
+            }
+            Some(m)
         }
-        specmux_io::json::write_json(&files.path("metrics.json"), &m)?;
-    }
+        None => None,
+    };
+    let report = ReconstructReport {
+        provenance: run::Provenance::new(lib),
+        frame: frame_name,
+        experiment: exp.file.clone(),
+        calibration: ReconstructCalibration {
+            source: cal.source.clone(),
+            carriers: cal.carriers.clone(),
+        },
+        unmix: stats,
+        metrics,
+    };
+    specmux_io::json::write_json(&files.path("reconstruct.json"), &report)?;
     crate::panel::write_figures(&exp, lib, truth.as_ref().map(|t| &t.1), &cube, &files)?;
     finish(files, out, &mut text)?;
     Ok(text)
-}
-
-/// A camera frame: one channel of an EXR file.
-fn read_frame(path: &Path) -> Result<specmux_core::Cube> {
-    let (frame, _) = exr_io::read(path)?;
-    let bad = |msg: String| Error::Exr {
-        path: path.to_path_buf(),
-        msg,
-    };
-    if frame.planes != 1 {
-        return Err(bad(format!(
-            "a frame has one channel, this file has {}",
-            frame.planes
-        )));
-    }
-    if let Some(p) = frame.data.iter().position(|v| !v.is_finite()) {
-        let (x, y) = (p % frame.width, p / frame.width);
-        return Err(bad(format!(
-            "pixel ({x}, {y}) is {}: a frame must be finite",
-            frame.data[p]
-        )));
-    }
-    Ok(frame)
 }
 
 /// A truth cube that matches the frame's size and the experiment's band count.

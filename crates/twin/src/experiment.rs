@@ -16,6 +16,7 @@ use crate::timing::TimingConfig;
 use serde::{Deserialize, Serialize};
 use specmux_core::carriers::{self, Carrier, CarrierConfig};
 use specmux_core::reconstructor::{ComputeDevice, ReconConfig};
+use specmux_core::spectral::{Curve, Library};
 use specmux_core::{Error, Result};
 use std::path::Path;
 
@@ -32,6 +33,9 @@ pub struct Experiment {
     /// The file it came from (for messages and relative paths); not part of the TOML.
     #[serde(skip)]
     pub file: String,
+    /// The keys the file wrote, to tell a value the user set from a default (`wrote`).
+    #[serde(skip)]
+    pub written: toml::Table,
 }
 
 /// `[compute]`: the device the reconstruction runs on ("cpu", the default; "gpu"; "auto").
@@ -89,8 +93,38 @@ impl Experiment {
             }
         })?;
         e.file = file.to_string();
+        e.written = text.parse().unwrap_or_default();
+        if e.scene.source.starts_with("exr:") {
+            let wrote = |k: &str| e.wrote(k);
+            let adopted = scene::exr_geometry(&e.scene, file, wrote)?;
+            e.scene = adopted;
+        }
         e.validate()?;
         Ok(e)
+    }
+
+    /// True when the experiment file wrote `key` (dotted: `scene.size`, `reconstruct.gap.levels`).
+    pub fn wrote(&self, key: &str) -> bool {
+        let mut table = &self.written;
+        let mut parts = key.split('.').peekable();
+        while let Some(p) = parts.next() {
+            match (table.get(p), parts.peek()) {
+                (Some(_), None) => return true,
+                (Some(toml::Value::Table(t)), Some(_)) => table = t,
+                _ => return false,
+            }
+        }
+        false
+    }
+
+    /// A curve the experiment names: a library name (`wheel/red`), or a CSV file of one's own
+    /// when the name ends in `.csv`, relative to the experiment file's folder.
+    pub fn curve(&self, lib: &Library, name: &str) -> Result<Curve> {
+        if !name.ends_with(".csv") {
+            return lib.curve(name);
+        }
+        let path = self.scene.path(name, &self.file);
+        specmux_core::spectral::library::curve_file(&path, name)
     }
 
     /// Read an experiment file.

@@ -102,7 +102,7 @@ impl Rig {
         // Transmittances, QE and light are physical quantities: never negative.
         let named = |key: &str, name: &str| {
             let bad = |why: &str| Error::config(&exp.file, key, format!("\"{name}\""), why);
-            let c = lib.curve(name).map_err(|e| bad(&e.to_string()))?;
+            let c = exp.curve(lib, name).map_err(|e| bad(&e.to_string()))?;
             match c
                 .wavelengths()
                 .iter()

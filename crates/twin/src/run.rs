@@ -8,7 +8,7 @@ use crate::rig::Rig;
 use crate::scene::Materials;
 use crate::sensor::Sensor;
 use serde::Serialize;
-use specmux_core::calibration::{Calibration, MeasuredCarrier};
+use specmux_core::calibration::{Calibration, CalibrationFrames, MeasuredCarrier};
 use specmux_core::crosstalk::{self, ErrorBudget};
 use specmux_core::demux::{Demux, SUPER_GAUSSIAN_ORDER};
 use specmux_core::metrics::{self, Metrics};
@@ -107,9 +107,34 @@ pub struct BasisReport {
     pub held_out: BasisFit,
 }
 
+/// Version of the JSON reports' layout (docs/report-schema.md): raised when a key is renamed,
+/// removed or changes meaning; keys may be added within a version.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// What wrote a JSON report: the layout's version, specmux's version and the spectral library.
+#[derive(Clone, Debug, Serialize)]
+pub struct Provenance {
+    pub schema_version: u32,
+    pub specmux_version: String,
+    /// The spectral library's folder, or "embedded (specmux X.Y.Z)".
+    pub spectra: String,
+}
+
+impl Provenance {
+    pub fn new(lib: &Library) -> Provenance {
+        Provenance {
+            schema_version: SCHEMA_VERSION,
+            specmux_version: env!("CARGO_PKG_VERSION").to_string(),
+            spectra: lib.provenance(),
+        }
+    }
+}
+
 /// Everything an experiment run measured.
 #[derive(Clone, Debug, Serialize)]
 pub struct RunReport {
+    #[serde(flatten)]
+    pub provenance: Provenance,
     pub experiment: String,
     pub scene: String,
     pub size: [usize; 2],
@@ -161,8 +186,12 @@ pub fn reconstructor(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Rec
     Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)
 }
 
-/// The core's calibration from the frames the twin captures for this rig.
-pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
+/// The calibration frames the twin captures for this rig (`[calibration]`).
+pub fn calibration_frames(
+    exp: &Experiment,
+    rig: &Rig,
+    sim: &Simulated,
+) -> Result<CalibrationFrames> {
     let sensor = match &exp.rig.sensor {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?),
         None => None,
@@ -172,7 +201,12 @@ pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calib
         exposed_white: &sim.exposed_white,
         full_scale: sim.full_scale,
     };
-    let frames = captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())?;
+    captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())
+}
+
+/// The core's calibration from the frames the twin captures for this rig.
+pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
+    let frames = calibration_frames(exp, rig, sim)?;
     // A camera whose flat does not rise above its dark, a pattern with no carrier: name the
     // section that made the frames so.
     let key = if exp.rig.sensor.is_some() {
@@ -209,6 +243,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     };
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let report = RunReport {
+        provenance: Provenance::new(lib),
         warnings: warnings(&rig, &frame, &results),
         frame,
         results,

@@ -9,15 +9,19 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SceneConfig {
-    /// `dead-leaves`, `shaded-objects`, `bars`, `exr:<path>` (a reflectance or radiance cube), or
+    /// `dead-leaves`, `shaded-objects`, `bars`, `exr:<path>` (a reflectance or radiance cube,
+    /// relative to the experiment file; its size and band grid come from the file), or
     /// `mitsuba:<prefix>` (a Mitsuba render `<prefix>_truth.exr`, radiance; scene/mitsuba.rs).
     pub source: String,
-    /// Width and height in pixels (procedural scenes; the prototype's 768 × 768).
+    /// Width and height in pixels (procedural scenes; the prototype's 768 × 768; an EXR cube's
+    /// own).
     pub size: [usize; 2],
-    /// Illuminant curve under spectra/ for a reflectance scene; for a radiance scene the light
+    /// Illuminant curve (a library name, or a `.csv` file relative to the experiment) for a
+    /// reflectance scene; for a radiance scene the light
     /// that lit it (the basis is lit by it, rig.rs), `""` for none.
     pub illuminant: String,
-    /// `reflectance` (lit by `illuminant`) or `radiance` (used as it is).
+    /// `reflectance` (lit by `illuminant`) or `radiance` (used as it is). Required for an
+    /// `exr:` cube: the file cannot say which it holds.
     pub quantity: Quantity,
     /// Seed of the scene's random draws.
     pub seed: u64,
@@ -74,7 +78,8 @@ impl SceneConfig {
         })
     }
 
-    /// Path of an `exr:` scene source, relative to the experiment file's folder.
+    /// A path the experiment names (an `exr:` source, a CSV curve), relative to the experiment
+    /// file's folder.
     pub fn path(&self, rel: &str, file: &str) -> PathBuf {
         let p = Path::new(rel);
         if p.is_absolute() {
@@ -147,4 +152,78 @@ impl SceneConfig {
         }
         Ok(())
     }
+}
+
+/// An `exr:` scene's size and band grid as the file gives them: `scene.size` and
+/// `scene.wavelengths_nm` taken from the file when the experiment leaves them out (`wrote`),
+/// checked against it when it writes them. `scene.quantity` must be written.
+pub fn exr_geometry(
+    cfg: &SceneConfig,
+    file: &str,
+    wrote: impl Fn(&str) -> bool,
+) -> Result<SceneConfig> {
+    let path = cfg.path(cfg.source.trim_start_matches("exr:"), file);
+    if !wrote("scene.quantity") {
+        let why = format!(
+            "required for an external cube: say whether {} holds \"reflectance\" (lit by scene.illuminant) or \"radiance\"",
+            path.display()
+        );
+        return Err(Error::config(file, "scene.quantity", "absent", &why));
+    }
+    let (w, h, names) = specmux_io::exr::header(&path)?;
+    if wrote("scene.size") && cfg.size != [w, h] {
+        let [a, b] = cfg.size;
+        let why = format!(
+            "{} is {w}×{h}: leave scene.size out to take the file's size",
+            path.display()
+        );
+        return Err(Error::config(
+            file,
+            "scene.size",
+            format!("[{a}, {b}]"),
+            &why,
+        ));
+    }
+    let mut out = cfg.clone();
+    out.size = [w, h];
+    if !wrote("scene.wavelengths_nm") {
+        out.wavelengths_nm = grid_of_channels(&names, &path)?;
+    }
+    Ok(out)
+}
+
+/// `[first, last, step]` of channels named by wavelength (`0400.0nm`) on a uniform grid.
+fn grid_of_channels(names: &[String], path: &Path) -> Result<[f64; 3]> {
+    let err = |msg: String| Error::Exr {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let wl = names
+        .iter()
+        .map(|n| {
+            specmux_io::exr::parse_band_name(n).ok_or_else(|| {
+                err(format!(
+                    "channel `{n}` names no wavelength: name the bands like 0400.0nm"
+                ))
+            })
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    if wl.len() < 2 {
+        return Err(err(format!(
+            "{} channel(s): a spectral cube needs at least two bands",
+            wl.len()
+        )));
+    }
+    let step = (wl[wl.len() - 1] - wl[0]) / (wl.len() - 1) as f64;
+    for (k, (n, &v)) in names.iter().zip(&wl).enumerate() {
+        let want = wl[0] + k as f64 * step;
+        if !(step > 0.0) || (v - want).abs() > 1e-3 * step.abs().max(1.0) {
+            return Err(err(format!(
+                "channel `{n}` ({v} nm) is off a uniform grid {} to {} nm (band {k} would be {want} nm); channels sort by name, so zero-pad them (0400.0nm)",
+                wl[0],
+                wl[wl.len() - 1]
+            )));
+        }
+    }
+    Ok([wl[0], wl[wl.len() - 1], step])
 }

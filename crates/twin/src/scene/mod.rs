@@ -7,7 +7,7 @@ pub mod dead_leaves;
 pub mod mitsuba;
 pub mod shaded;
 
-pub use config::{Quantity, SceneConfig};
+pub use config::{exr_geometry, Quantity, SceneConfig};
 
 use rayon::prelude::*;
 use specmux_core::error::Error;
@@ -139,6 +139,20 @@ fn exr_scene(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Scene> {
         path: path.clone(),
         msg,
     };
+    if [cube.width, cube.height] != cfg.size {
+        let [w, h] = cfg.size;
+        return Err(Error::config(
+            file,
+            "scene.size",
+            format!("[{w}, {h}]"),
+            &format!(
+                "{} is {}×{}: an EXR scene takes its size from the file",
+                path.display(),
+                cube.width,
+                cube.height
+            ),
+        ));
+    }
     if cube.planes != grid.count {
         return Err(err(format!(
             "{} channels, the experiment's grid scene.wavelengths_nm has {} bands",

@@ -1,0 +1,149 @@
+//! Camera frames and calibration frames as a user brings them: one-channel EXR (any units) or
+//! 16-bit greyscale PNG (raw DN). An 8-bit PNG is a preview, not data, and TIFF is not read:
+//! both are refused with what to pass instead.
+
+use crate::exr;
+use specmux_core::calibration::CalibrationFrames;
+use specmux_core::{Cube, Error, Result};
+use std::path::{Path, PathBuf};
+
+/// True when the file holds raw DN (a 16-bit PNG) rather than values in the twin's units.
+pub fn is_raw_dn(path: &Path) -> bool {
+    extension(path) == "png"
+}
+
+fn extension(path: &Path) -> String {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_lowercase())
+        .unwrap_or_default()
+}
+
+/// One camera frame, checked finite.
+pub fn read(path: &Path) -> Result<Cube> {
+    let bad = |msg: String| Error::Exr {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let frame = match extension(path).as_str() {
+        "exr" => exr::read(path)?.0,
+        "png" => read_png16(path)?,
+        "tif" | "tiff" => return Err(bad("TIFF frames are not read: convert the frame to a one-channel EXR or a 16-bit greyscale PNG".into())),
+        e => return Err(bad(format!("`.{e}` is not a frame format specmux reads: pass a one-channel EXR (.exr) or a 16-bit greyscale PNG (.png)"))),
+    };
+    if frame.planes != 1 {
+        return Err(bad(format!(
+            "a frame has one channel, this file has {}",
+            frame.planes
+        )));
+    }
+    if let Some(p) = frame.data.iter().position(|v| !v.is_finite()) {
+        let (x, y) = (p % frame.width, p / frame.width);
+        return Err(bad(format!(
+            "pixel ({x}, {y}) is {}: a frame must be finite",
+            frame.data[p]
+        )));
+    }
+    Ok(frame)
+}
+
+/// A 16-bit greyscale PNG as DN.
+fn read_png16(path: &Path) -> Result<Cube> {
+    let bad = |msg: String| Error::Image {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let img = image::open(path).map_err(|e| bad(e.to_string()))?;
+    let image::DynamicImage::ImageLuma16(g) = img else {
+        return Err(bad(format!(
+            "a {:?} PNG is a preview, not a camera frame: pass frame.exr or a 16-bit greyscale PNG of raw DN",
+            img.color()
+        )));
+    };
+    let (w, h) = (g.width() as usize, g.height() as usize);
+    Cube::from_vec(w, h, 1, g.into_raw().into_iter().map(f32::from).collect())
+}
+
+/// The frame `stem` in `dir` (`.exr`, else `.png`), None when neither exists.
+fn find(dir: &Path, stem: &str) -> Option<PathBuf> {
+    ["exr", "png"]
+        .iter()
+        .map(|e| dir.join(format!("{stem}.{e}")))
+        .find(|p| p.is_file())
+}
+
+/// Read a calibration folder for `n` carriers on `width`×`height` frames: `dark.exr` and
+/// `flat.exr` (both or neither; without them the patterns are taken as linear) and
+/// `pattern-1.exr` … `pattern-N.exr`, one per carrier in the experiment's order (a 16-bit
+/// `.png` in place of any `.exr` is read too). `source` in the result names the folder.
+pub fn read_calibration(
+    dir: &Path,
+    n: usize,
+    width: usize,
+    height: usize,
+) -> Result<CalibrationFrames> {
+    let missing = |stem: &str| {
+        Error::io(
+        dir.join(format!("{stem}.exr")),
+        std::io::Error::new(std::io::ErrorKind::NotFound, "a calibration folder holds dark.exr and flat.exr (or neither) and pattern-1.exr … pattern-N.exr, one per carrier"),
+    )
+    };
+    let sized = |p: PathBuf| -> Result<Cube> {
+        let f = read(&p)?;
+        if (f.width, f.height) != (width, height) {
+            return Err(Error::Exr {
+                path: p,
+                msg: format!("{}×{}, the frame is {width}×{height}", f.width, f.height),
+            });
+        }
+        Ok(f)
+    };
+    let (dark, flat) = match (find(dir, "dark"), find(dir, "flat")) {
+        (Some(d), Some(f)) => (Some(sized(d)?), Some(sized(f)?)),
+        (None, None) => (None, None),
+        (None, _) => return Err(missing("dark")),
+        (_, None) => return Err(missing("flat")),
+    };
+    let mut patterns = Cube::zeros(width, height, n);
+    for k in 0..n {
+        let stem = format!("pattern-{}", k + 1);
+        let p = sized(find(dir, &stem).ok_or_else(|| missing(&stem))?)?;
+        patterns.plane_mut(k).copy_from_slice(&p.data);
+    }
+    if let Some(extra) = find(dir, &format!("pattern-{}", n + 1)) {
+        return Err(Error::Exr {
+            path: extra,
+            msg: format!("the experiment has {n} carriers, so pattern-1 … pattern-{n} only"),
+        });
+    }
+    Ok(CalibrationFrames {
+        patterns_linear: dark.is_none(),
+        dark,
+        flat,
+        patterns,
+        frames_averaged: 1,
+        source: format!("files in {}", dir.display()),
+    })
+}
+
+/// Write `frames` as a calibration folder `read_calibration` reads back (EXR, one channel each).
+/// Linear patterns beside dark and flat frames (the oracle) would read back as raw: refused.
+pub fn write_calibration(dir: &Path, frames: &CalibrationFrames) -> Result<()> {
+    if frames.patterns_linear && frames.dark.is_some() {
+        return Err(Error::Shape(
+            "oracle calibration frames are not captures and are not written".into(),
+        ));
+    }
+    let y = ["Y".to_string()];
+    if let (Some(d), Some(f)) = (&frames.dark, &frames.flat) {
+        exr::write(&dir.join("dark.exr"), d, &y)?;
+        exr::write(&dir.join("flat.exr"), f, &y)?;
+    }
+    for k in 0..frames.patterns.planes {
+        exr::write(
+            &dir.join(format!("pattern-{}.exr", k + 1)),
+            &frames.patterns.extract(k),
+            &y,
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,393 @@
+//! A user's own data through the command line (docs/inputs.md): cubes, curves, frames and
+//! calibration frames of their own, built-in scene names everywhere, .npy output, the JSON
+//! report's schema, and a binary that works from any folder.
+
+use specmux_core::Cube;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+mod common;
+use common::tmpdir;
+
+/// Run `specmux ARGS` in folder `cwd`; return (success, stdout, stderr).
+fn specmux_in(cwd: &Path, args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_specmux"))
+        .current_dir(cwd)
+        .env_remove("SPECMUX_SPECTRA")
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The command must succeed; its stdout.
+fn ok(cwd: &Path, args: &[&str]) -> String {
+    let (ok, out, err) = specmux_in(cwd, args);
+    assert!(ok, "specmux {args:?} failed: {err}");
+    out
+}
+
+/// The command must fail with one line that contains every `must`.
+fn refused(cwd: &Path, args: &[&str], must: &[&str]) -> String {
+    let (ok, _, err) = specmux_in(cwd, args);
+    assert!(!ok, "specmux {args:?} should fail");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "one line expected: {err}"
+    );
+    assert!(!err.contains("panicked"), "{err}");
+    for m in must {
+        assert!(err.contains(m), "`{m}` missing from: {err}");
+    }
+    err
+}
+
+/// The PSNR printed on a line `against …: PSNR x dB`.
+fn psnr(stdout: &str) -> f64 {
+    let line = stdout.lines().find(|l| l.contains("PSNR")).expect(stdout);
+    let after = line.split("PSNR ").nth(1).unwrap();
+    after.split(' ').next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read() {
+    let d = tmpdir("own-refuse");
+    ok(&d, &["demo", "--size", "64", "--out", "demo"]);
+    refused(
+        &d,
+        &["reconstruct", "demo/frame.exr"],
+        &["demo/frame.exr", "--experiment"],
+    );
+    // The 8-bit PNG beside the frame is a preview.
+    refused(
+        &d,
+        &[
+            "reconstruct",
+            "demo/frame.png",
+            "--experiment",
+            "dead-leaves",
+        ],
+        &["demo/frame.png", "16-bit"],
+    );
+    std::fs::write(d.join("frame.tif"), b"II*\0").unwrap();
+    refused(
+        &d,
+        &["reconstruct", "frame.tif", "--experiment", "dead-leaves"],
+        &["frame.tif", "TIFF"],
+    );
+    // A 16-bit PNG holds raw DN: an experiment without a camera cannot read it.
+    let img = image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(64, 64, image::Luma([1000]));
+    img.save(d.join("raw.png")).unwrap();
+    refused(
+        &d,
+        &["reconstruct", "raw.png", "--experiment", "dead-leaves"],
+        &["rig.sensor", "raw.png"],
+    );
+}
+
+#[test]
+fn built_in_scene_names_work_in_every_command_and_a_bad_size_names_the_flag() {
+    let d = tmpdir("own-names");
+    let out = ok(&d, &["simulate", "dead-leaves", "--explain"]);
+    assert!(out.contains("scene"), "{out}");
+    refused(&d, &["simulate", "nope"], &["nope", "built-in scene"]);
+    refused(
+        &d,
+        &["demo", "--size", "100"],
+        &["--size", "100", "96 or 112"],
+    );
+}
+
+/// A 48 × 32 cube of 16 bands 450–600 nm, channels named as specmux names them.
+fn write_cube(path: &Path) -> Cube {
+    let (w, h, n) = (48, 32, 16);
+    let data = (0..w * h * n)
+        .map(|i| 0.2 + 0.6 * ((i % 97) as f32 / 97.0))
+        .collect();
+    let cube = Cube::from_vec(w, h, n, data).unwrap();
+    let names: Vec<String> = (0..n)
+        .map(|k| specmux_io::exr::band_name(450.0 + 10.0 * k as f64))
+        .collect();
+    specmux_io::exr::write(path, &cube, &names).unwrap();
+    cube
+}
+
+#[test]
+fn an_exr_scene_takes_its_size_and_bands_from_the_file_and_must_say_its_quantity() {
+    let d = tmpdir("own-exr");
+    std::fs::create_dir_all(d.join("exp")).unwrap();
+    let cube = write_cube(&d.join("exp/mine.exr"));
+    let exp = |extra: &str| {
+        std::fs::write(
+            d.join("exp/e.toml"),
+            format!("[scene]\nsource = \"exr:mine.exr\"\n{extra}"),
+        )
+        .unwrap();
+    };
+    exp("");
+    refused(
+        &d,
+        &["simulate", "exp/e.toml"],
+        &["exp/e.toml", "scene.quantity", "mine.exr"],
+    );
+    exp("quantity = \"reflectance\"\nsize = [64, 64]\n");
+    refused(
+        &d,
+        &["simulate", "exp/e.toml"],
+        &["scene.size", "[64, 64]", "48×32"],
+    );
+    exp("quantity = \"reflectance\"\n");
+    ok(&d, &["simulate", "exp/e.toml", "--out", "sim"]);
+    let (truth, names) = specmux_io::exr::read(&d.join("sim/truth.exr")).unwrap();
+    assert_eq!((truth.width, truth.height, truth.planes), (48, 32, 16));
+    assert_eq!(truth.data, cube.data);
+    assert_eq!(names[15], "0600.0nm");
+    let (frame, _) = specmux_io::exr::read(&d.join("sim/frame.exr")).unwrap();
+    assert_eq!((frame.width, frame.height), (48, 32));
+}
+
+#[test]
+fn curves_given_as_csv_paths_are_read_beside_the_experiment() {
+    let d = tmpdir("own-csv");
+    let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");
+    std::fs::create_dir_all(d.join("exp/curves")).unwrap();
+    for (from, to) in [
+        ("wheel/red", "curves/red.csv"),
+        ("camera/mono_qe", "qe.csv"),
+    ] {
+        std::fs::copy(lib.join(format!("{from}.csv")), d.join("exp").join(to)).unwrap();
+    }
+    let base = "[scene]\nsize = [64, 64]\n";
+    let wheel = |red: &str| {
+        format!("[rig.wheel]\nfilters = [\"{red}\", \"wheel/green\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n")
+    };
+    std::fs::write(
+        d.join("exp/lib.toml"),
+        format!("{base}{}", wheel("wheel/red")),
+    )
+    .unwrap();
+    let own = format!(
+        "{base}{}[rig.camera]\nqe = \"qe.csv\"\n",
+        wheel("curves/red.csv")
+    );
+    std::fs::write(d.join("exp/own.toml"), own).unwrap();
+    ok(&d, &["simulate", "exp/lib.toml", "--out", "a"]);
+    ok(&d, &["simulate", "exp/own.toml", "--out", "b"]);
+    let frame = |dir: &str| {
+        specmux_io::exr::read(&d.join(dir).join("frame.exr"))
+            .unwrap()
+            .0
+    };
+    assert_eq!(
+        frame("a").data,
+        frame("b").data,
+        "the same curves, read from the user's files"
+    );
+    std::fs::remove_file(d.join("exp/qe.csv")).unwrap();
+    refused(
+        &d,
+        &["simulate", "exp/own.toml"],
+        &["exp/own.toml", "rig.camera.qe", "exp/qe.csv"],
+    );
+}
+
+const MISALIGNED: &str = "[rig.alignment]\nrotation_deg = 0.4\nmagnification = 1.003\n";
+
+#[test]
+fn measured_calibration_frames_are_used_by_reconstruct() {
+    let d = tmpdir("own-cal");
+    let base = "[scene]\nsource = \"shaded-objects\"\nsize = [256, 256]\n[reconstruct.gap]\nmethod = \"fourier\"\n[rig.sensor]\n";
+    std::fs::write(d.join("rig.toml"), format!("{base}{MISALIGNED}")).unwrap();
+    std::fs::write(d.join("design.toml"), base).unwrap();
+    // The rig as built (misaligned) records the frame and its calibration frames.
+    ok(&d, &["simulate", "rig.toml", "--out", "rec"]);
+    for f in ["dark", "flat", "pattern-1", "pattern-6"] {
+        assert!(d.join(format!("rec/calibration/{f}.exr")).is_file(), "{f}");
+    }
+    // Reconstruct with `exp`'s rig, calibrated from the recorded frames or not, into `out`.
+    let run = |exp: &str, cal: bool, out: &str| {
+        let mut a = vec!["reconstruct", "rec/frame.exr", "--experiment", exp];
+        a.extend(["--truth", "rec/truth.exr", "--out", out]);
+        if cal {
+            a.extend(["--calibration", "rec/calibration"]);
+        }
+        let text = ok(&d, &a);
+        (psnr(&text), text)
+    };
+    let (with, text) = run("design.toml", true, "with");
+    assert!(
+        text.contains("calibration: files in rec/calibration"),
+        "{text}"
+    );
+    let (without, text) = run("design.toml", false, "without");
+    assert!(text.contains("simulated captures"), "{text}");
+    // The design alone misses the carriers the misalignment moved; the recorded frames find
+    // them, exactly as the twin's own captures of the misaligned rig do (EXR keeps f32 exact).
+    let (twin, _) = run("rig.toml", false, "twin");
+    eprintln!("with the files {with:.2} dB, without {without:.2} dB, the rig's own {twin:.2} dB");
+    assert!(
+        with > without + 6.0 && (with - twin).abs() < 0.01,
+        "with the files {with:.2} dB, without {without:.2} dB, the rig's own {twin:.2} dB"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("with/reconstruct.json")).unwrap())
+            .unwrap();
+    assert!(report["calibration"]["source"]
+        .as_str()
+        .unwrap()
+        .contains("rec/calibration"));
+    // A folder that lacks a pattern is refused by name.
+    std::fs::remove_file(d.join("rec/calibration/pattern-6.exr")).unwrap();
+    let a = [
+        "reconstruct",
+        "rec/frame.exr",
+        "--experiment",
+        "design.toml",
+    ];
+    refused(
+        &d,
+        &[&a[..], &["--calibration", "rec/calibration"]].concat(),
+        &["pattern-6.exr"],
+    );
+}
+
+/// Shape and samples of a little-endian float32 `.npy` file (the format numpy writes).
+fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
+    let b = std::fs::read(path).unwrap();
+    assert_eq!(&b[..8], b"\x93NUMPY\x01\x00");
+    let n = u16::from_le_bytes([b[8], b[9]]) as usize;
+    let header = std::str::from_utf8(&b[10..10 + n]).unwrap();
+    assert!(header.contains("'descr': '<f4'") && header.contains("'fortran_order': False"));
+    let shape = header
+        .split("'shape': (")
+        .nth(1)
+        .unwrap()
+        .split(')')
+        .next()
+        .unwrap();
+    let shape = shape
+        .split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|s| s.trim().parse().unwrap())
+        .collect();
+    let data = b[10 + n..]
+        .chunks(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    (shape, data)
+}
+
+/// The keys and JSON types docs/report-schema.md lists for `file` (rows `| file | key | type |`).
+fn schema_rows(file: &str) -> Vec<(String, String)> {
+    let doc = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/report-schema.md"),
+    )
+    .unwrap();
+    doc.lines()
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            (cells.len() > 4 && cells[1] == file)
+                .then(|| (cells[2].trim_matches('`').to_string(), cells[3].to_string()))
+        })
+        .collect()
+}
+
+/// Every documented key is present with its documented type.
+fn check_schema(file: &str, report: &serde_json::Value) {
+    let rows = schema_rows(file);
+    assert!(
+        rows.len() > 5,
+        "docs/report-schema.md lists no keys for {file}"
+    );
+    for (key, ty) in rows {
+        let v = key
+            .split('.')
+            .fold(report, |v, k| match k.strip_suffix("[]") {
+                Some(array) => &v[array][0],
+                None => &v[k],
+            });
+        let fits = match ty.as_str() {
+            "integer" => v.is_u64(),
+            "number" => v.is_number(),
+            "string" => v.is_string(),
+            "array" => v.is_array(),
+            "object" => v.is_object(),
+            "number or null" => v.is_number() || v.is_null(),
+            "object or null" => v.is_object() || v.is_null(),
+            "array or null" => v.is_array() || v.is_null(),
+            t => panic!("unknown type `{t}` for {key}"),
+        };
+        assert!(fits, "{file}: `{key}` should be {ty}, is {v}");
+    }
+}
+
+#[test]
+fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder() {
+    // The binary copied out of the build tree, run from an empty folder: nothing of the
+    // checkout is near it, and SPECMUX_SPECTRA is unset.
+    let d = tmpdir("own-install");
+    let bin_dir = d.join("bin");
+    std::fs::create_dir_all(&bin_dir).unwrap();
+    let bin: PathBuf = bin_dir.join("specmux");
+    std::fs::copy(env!("CARGO_BIN_EXE_specmux"), &bin).unwrap();
+    let work = d.join("empty");
+    std::fs::create_dir_all(&work).unwrap();
+    let out = Command::new(&bin)
+        .current_dir(&work)
+        .env_remove("SPECMUX_SPECTRA")
+        .args(["demo", "--size", "64", "--npy"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let demo = work.join("out/demo");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(demo.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        report["spectra"],
+        format!("embedded (specmux {})", env!("CARGO_PKG_VERSION"))
+    );
+    assert_eq!(report["specmux_version"], env!("CARGO_PKG_VERSION"));
+    check_schema("report.json", &report);
+    for (stem, shape) in [
+        ("cube", vec![31, 64, 64]),
+        ("channels", vec![6, 64, 64]),
+        ("frame", vec![64, 64]),
+    ] {
+        let (s, data) = read_npy(&demo.join(format!("{stem}.npy")));
+        assert_eq!(s, shape, "{stem}");
+        let (exr, _) = specmux_io::exr::read(&demo.join(format!("{stem}.exr"))).unwrap();
+        assert_eq!(data, exr.data, "{stem}.npy holds the EXR's samples");
+    }
+    // reconstruct.json, from the same binary with a --spectra folder: its provenance says so.
+    let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");
+    let out = Command::new(&bin)
+        .current_dir(&work)
+        .args([
+            "--spectra",
+            lib.to_str().unwrap(),
+            "reconstruct",
+            "out/demo/frame.exr",
+        ])
+        .args(["--experiment", "dead-leaves", "--out", "rec"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rec: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(work.join("rec/reconstruct.json")).unwrap())
+            .unwrap();
+    assert_eq!(rec["spectra"], lib.display().to_string());
+    check_schema("reconstruct.json", &rec);
+}
