@@ -120,6 +120,9 @@ pub fn run(plan: &Plan, dev: &mut Devices, sink: &mut dyn Sink) -> Result<Outcom
                 .unwrap_or_default();
             let kind = match e {
                 Error::Timeout { .. } => "not-answering",
+                // Ctrl-C seen inside the sink's own work (a frame's reconstruction): the
+                // operator's stop, like the one polled between frames.
+                Error::Core(specmux_core::Error::Interrupted(_)) => "interrupted",
                 _ => "device-error",
             };
             out.incidents.push(Incident {
@@ -127,7 +130,9 @@ pub fn run(plan: &Plan, dev: &mut Devices, sink: &mut dyn Sink) -> Result<Outcom
                 frame_ids: id,
                 message: e.to_string(),
             });
-            out.stopped_because = Some(e.to_string());
+            if kind != "interrupted" {
+                out.stopped_because = Some(e.to_string());
+            }
         }
     }
     Ok(out)
@@ -278,8 +283,10 @@ impl Session<'_> {
                 break;
             }
             let (rec, frame) = self.next(Capture::Scene, seq, armed)?;
-            sink.frame(&rec, &frame)?;
+            // The frame was acquired even if the sink's own work on it stops (Ctrl-C): keep it.
+            let handled = sink.frame(&rec, &frame);
             self.out.frames.push(rec);
+            handled?;
             if let Some(e) = self.pending.take() {
                 return Err(e);
             }
