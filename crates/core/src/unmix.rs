@@ -17,12 +17,8 @@ use crate::Cube;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use serde::Serialize;
-use std::sync::Arc;
 
 mod dual;
-mod maps;
-
-use maps::{ActiveMap, MapCache, Maps};
 
 /// Largest number of basis vectors J (stack arrays in the per-pixel solver).
 pub const MAX_BASIS: usize = 8;
@@ -63,8 +59,6 @@ pub struct Unmixer {
     /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the dual active set's starting factor.
     linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
     condition: f64,
-    /// Solution maps of the working sets met so far (`maps.rs`), shared by clones and frames.
-    maps: MapCache,
 }
 
 /// The factored problem as plain tables, for another implementation of the same solver (the
@@ -117,10 +111,7 @@ pub struct UnmixStats {
     /// Of those, pixels where the non-negativity bound is active at the solution.
     pub bound_pixels: usize,
     pub max_iterations: usize,
-    /// Dual active-set iterations, over the constrained pixels the dual method solved.
     pub total_iterations: usize,
-    /// Constrained pixels solved by the map of a working set met before (no iterations).
-    pub mapped_pixels: usize,
 }
 
 /// The second-difference matrix ((bands − 2) × bands), rows [1, −2, 1]; empty below 3 bands.
@@ -216,7 +207,6 @@ impl Unmixer {
                 .collect(),
             linv_t,
             condition,
-            maps: MapCache::default(),
         })
     }
 
@@ -410,8 +400,8 @@ impl Unmixer {
             .into_par_iter()
             .enumerate()
             .map_init(
-                || (vec![0.0f32; chunk_px], Maps::new()),
-                |(minr, local), (k, mut bands)| {
+                || vec![0.0f32; chunk_px],
+                |minr, (k, mut bands)| {
                     let start = k * chunk_px;
                     let len = bands[0].len();
                     let xs: [&[f32]; MAX_CHANNELS] = std::array::from_fn(|j| {
@@ -421,7 +411,7 @@ impl Unmixer {
                             &[]
                         }
                     });
-                    self.unmix_chunk(&xs[..self.c], &mut bands, &mut minr[..len], local)
+                    self.unmix_chunk(&xs[..self.c], &mut bands, &mut minr[..len])
                         .map_err(|(i, msg)| {
                             let p = start + i;
                             Error::Numerical(format!(
@@ -439,21 +429,18 @@ impl Unmixer {
                     bound_pixels: a.bound_pixels + b.bound_pixels,
                     max_iterations: a.max_iterations.max(b.max_iterations),
                     total_iterations: a.total_iterations + b.total_iterations,
-                    mapped_pixels: a.mapped_pixels + b.mapped_pixels,
                 })
             })
     }
 
     /// One chunk: r = P x̂ band by band (plane-major, vectorisable), then the exact solver on the
-    /// pixels with a negative band: first a walk from the working set the previous such pixel
-    /// ended with (`maps.rs`; `local` holds this thread's maps), then the dual method. `minr`
-    /// is scratch of the chunk's length. An error carries the pixel's offset in the chunk.
+    /// pixels with a negative band. `minr` is scratch of the chunk's length. An error carries
+    /// the pixel's offset in the chunk.
     fn unmix_chunk(
         &self,
         xs: &[&[f32]],
         bands: &mut [&mut [f32]],
         minr: &mut [f32],
-        local: &mut Maps,
     ) -> std::result::Result<UnmixStats, (usize, String)> {
         let c = self.c;
         for (j, x) in xs.iter().enumerate() {
@@ -493,7 +480,6 @@ impl Unmixer {
         let mut xp = [0.0f64; MAX_CHANNELS];
         let mut alpha = [0.0f64; MAX_BASIS];
         let mut r = [0.0f64; MAX_BANDS];
-        let mut prev: Option<Arc<ActiveMap>> = None;
         for i in 0..minr.len() {
             if minr[i] >= 0.0 {
                 continue;
@@ -501,26 +487,16 @@ impl Unmixer {
             for (xv, x) in xp.iter_mut().zip(xs) {
                 *xv = x[i] as f64;
             }
-            stats.constrained_pixels += 1;
-            if let Some(map) = prev
-                .as_ref()
-                .and_then(|m| self.walk(m, &xp[..c], &mut r, local))
-            {
-                prev = Some(map);
-                stats.mapped_pixels += 1;
-                stats.bound_pixels += 1;
-            } else {
-                let info = self
-                    .solve(&xp[..c], &mut alpha[..self.n], &mut r)
-                    .map_err(|e| (i, e.to_string()))?;
-                stats.bound_pixels += (info.active > 0) as usize;
-                stats.max_iterations = stats.max_iterations.max(info.iterations);
-                stats.total_iterations += info.iterations;
-                prev = self.map_for(&info, local).or(prev);
-            }
+            let info = self
+                .solve(&xp[..c], &mut alpha[..self.n], &mut r)
+                .map_err(|e| (i, e.to_string()))?;
             for ((out, &v), g) in bands.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
                 out[i] = (v.max(0.0) * g) as f32;
             }
+            stats.constrained_pixels += 1;
+            stats.bound_pixels += (info.active > 0) as usize;
+            stats.max_iterations = stats.max_iterations.max(info.iterations);
+            stats.total_iterations += info.iterations;
         }
         Ok(stats)
     }
@@ -825,86 +801,6 @@ mod tests {
         assert_eq!(cases, 180);
     }
 
-    /// Band values of the dual method's solution, Bα (unclamped).
-    fn dual_bands(u: &Unmixer, x: &[f64]) -> ([f64; MAX_BANDS], SolveInfo) {
-        let (mut a, mut r) = ([0.0; MAX_BASIS], [0.0; MAX_BANDS]);
-        let info = u.solve(x, &mut a[..u.n], &mut r).unwrap();
-        (r, info)
-    }
-
-    /// Every working-set map met by the dual method on `xs`, tried on every x: where a map
-    /// accepts x, its bands equal the dual method's to `tol` of the pixel's unconstrained scale.
-    /// Returns (accepted, tried).
-    fn maps_agree_with_the_dual_method(u: &Unmixer, xs: &[Vec<f64>], tol: f64) -> (usize, usize) {
-        let mut local = Maps::new();
-        let maps: Vec<_> = xs
-            .iter()
-            .filter_map(|x| u.map_for(&dual_bands(u, x).1, &mut local))
-            .collect();
-        let (mut accepted, mut r) = (0, [0.0; MAX_BANDS]);
-        for x in xs {
-            let (want, _) = dual_bands(u, x);
-            // The dual method's own scale: the unconstrained solution's largest band.
-            let mut unc = [0.0; MAX_BANDS];
-            u.spectrum(&u.unconstrained_alpha(x)[..u.n], &mut unc);
-            let scale = unc[..u.m].iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            for map in &maps {
-                if u.walk(map, x, &mut r, &mut local).is_some() {
-                    accepted += 1;
-                    for k in 0..u.m {
-                        assert!(
-                            (r[k] - want[k].max(0.0)).abs() <= tol * scale,
-                            "band {k}: map {} vs dual {}",
-                            r[k],
-                            want[k]
-                        );
-                    }
-                }
-            }
-        }
-        (accepted, maps.len() * xs.len())
-    }
-
-    /// Agreement of a working-set map with the dual method, of the unconstrained scale. Both
-    /// solve the same KKT system; the dual method's Givens updates carry round-off through its
-    /// steps (seen: 1.4e-7 after 25 steps on the same working set as the map, whose freshly
-    /// factored answer agrees with itself across pixels to 1e-15).
-    const MAP_TOL: f64 = 1e-6;
-
-    #[test]
-    fn working_set_maps_match_the_dual_method() {
-        let mut rng = Pcg64::seed_from_u64(7);
-        let b = basis(&mut rng);
-        let f0 = filters(&mut rng, &b);
-        let mut f1 = f0.clone();
-        let c0 = f1.column(0).clone_owned();
-        for i in 0..6 {
-            f1[(i, 1)] = c0[i] * 0.9 + 1e-3 * normal(&mut rng);
-        }
-        // Random problems, then the ill-conditioned F with small η and a stiff η.
-        let (mut accepted, mut tried) = (0, 0);
-        for (f, eta) in [(&f0, 0.3), (&f0, 0.0), (&f1, 1e-4), (&f0, 1e4)] {
-            let u = Unmixer::new(f, &b, eta).unwrap();
-            let s = smooth_spectra(&mut rng, 1);
-            let base = f * (b.transpose() * s.column(0));
-            let xs: Vec<Vec<f64>> = (0..40)
-                .map(|_| {
-                    base.iter()
-                        .map(|v| v + 0.4 * normal(&mut rng) * v.abs().max(0.1))
-                        .collect()
-                })
-                .collect();
-            let (ok, n) = maps_agree_with_the_dual_method(&u, &xs, MAP_TOL);
-            accepted += ok;
-            tried += n;
-        }
-        assert!(accepted >= 100, "only {accepted} pixels accepted by a map");
-        assert!(
-            accepted < tried,
-            "every map accepted every pixel: the check is vacuous"
-        );
-    }
-
     #[test]
     fn all_negative_channels_give_zero_spectrum() {
         // With positive filters and a positive spectrum all channels are ≥ 0; all-negative x̂ has
@@ -940,21 +836,6 @@ mod tests {
         }
     }
 
-    proptest! {
-        #[test]
-        fn a_map_accepts_only_its_optimal_pixels(seed in 0u64..1000, spread in 0.05f64..2.0) {
-            let mut rng = Pcg64::seed_from_u64(seed);
-            let b = basis(&mut rng);
-            let f = filters(&mut rng, &b);
-            let u = Unmixer::new(&f, &b, 0.1).unwrap();
-            let x0: Vec<f64> = (0..6).map(|_| normal(&mut rng)).collect();
-            let xs: Vec<Vec<f64>> = (0..8)
-                .map(|_| x0.iter().map(|v| v + spread * normal(&mut rng)).collect())
-                .collect();
-            maps_agree_with_the_dual_method(&u, &xs, MAP_TOL);
-        }
-    }
-
     #[test]
     fn cube_unmixing_matches_the_pixel_solver() {
         let mut rng = Pcg64::seed_from_u64(5);
@@ -976,10 +857,6 @@ mod tests {
         assert!(
             stats.bound_pixels > 10 && stats.bound_pixels <= stats.constrained_pixels,
             "{stats:?}"
-        );
-        assert!(
-            stats.mapped_pixels > 0,
-            "no pixel took a working-set map: {stats:?}"
         );
         assert!(out.data.iter().all(|&v| v >= 0.0));
         let mut a = [0.0; J];

@@ -130,7 +130,6 @@ impl GpuUnmixer {
             bound_pixels: s[1] as usize,
             total_iterations: s[2] as usize,
             max_iterations: s[3] as usize,
-            mapped_pixels: 0,
         })
     }
 
