@@ -1,9 +1,10 @@
 //! Demultiplexing + unmixing of one 768×768 frame of the prototype (the real-time path), on the
 //! edge-rich default scene (most pixels' unconstrained spectra dip below zero, so the exact QP
 //! runs on them) and on the smooth CAVE-like scene the paper's figures describe; with a fresh
-//! output cube per frame and with one kept from frame to frame.
+//! output cube per frame and with one kept from frame to frame. Throughput is one frame per
+//! iteration, so criterion's "thrpt" is in frames/s; the rayon thread count is printed.
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use specmux_core::spectral::Library;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
@@ -12,6 +13,7 @@ use specmux_twin::run;
 use specmux_twin::scene::Materials;
 
 fn bench(c: &mut Criterion) {
+    eprintln!("rayon threads: {}", rayon::current_num_threads());
     let lib = Library::default_root();
     let materials = Materials::load(&lib).expect("spectra/ is readable");
     let scenes = [
@@ -38,6 +40,7 @@ fn bench(c: &mut Criterion) {
         eprintln!("{name}: {stats:?}");
         let mut g = c.benchmark_group(format!("768x768 {name}"));
         g.sample_size(20);
+        g.throughput(Throughput::Elements(1));
         g.bench_function("demultiplex", |b| {
             b.iter(|| recon.demultiplex(&frame).unwrap())
         });

@@ -175,34 +175,29 @@ fn gaussian_taps() -> [f64; 11] {
     g.map(|v| v / s)
 }
 
-/// 'Valid' separable filtering with the 11-tap window: output (w−10) × (h−10).
-fn filter_valid(img: &[f64], w: usize, h: usize, g: &[f64; 11]) -> Vec<f64> {
-    let (ow, oh) = (w - 10, h - 10);
-    let mut rows = vec![0.0; ow * h];
-    for y in 0..h {
-        for x in 0..ow {
-            rows[y * ow + x] = (0..11).map(|t| g[t] * img[y * w + x + t]).sum();
+/// 'Valid' filtering of one row with the 11-tap window (output `src.len() − 10` values),
+/// accumulated tap by tap in the order of the direct sum Σ_t g_t·src[x + t].
+fn filter_row(src: &[f64], g: &[f64; 11], dst: &mut [f64]) {
+    dst.fill(0.0);
+    for (t, &gt) in g.iter().enumerate() {
+        for (d, &s) in dst.iter_mut().zip(&src[t..]) {
+            *d += gt * s;
         }
     }
-    let mut out = vec![0.0; ow * oh];
-    for y in 0..oh {
-        for x in 0..ow {
-            out[y * ow + x] = (0..11).map(|t| g[t] * rows[(y + t) * ow + x]).sum();
-        }
-    }
-    out
 }
 
 /// Mean SSIM of one plane (Wang et al. 2004) over the valid region; a plane smaller than the
-/// window gives the single-window SSIM of the whole plane with uniform weights.
+/// window gives the single-window SSIM of the whole plane with uniform weights. The Gaussian
+/// window is applied as rows then columns, streaming: the row-filtered moments of the last 11
+/// rows are kept in a ring, so each plane is read once and nothing plane-sized is allocated.
 pub fn ssim_plane(a: &[f32], b: &[f32], w: usize, h: usize, range: f64) -> f64 {
     let (c1, c2) = ((0.01 * range).powi(2), (0.03 * range).powi(2));
     let formula = |ma: f64, mb: f64, va: f64, vb: f64, cov: f64| {
         ((2.0 * ma * mb + c1) * (2.0 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2))
     };
-    let a: Vec<f64> = a.iter().map(|&v| v as f64).collect();
-    let b: Vec<f64> = b.iter().map(|&v| v as f64).collect();
     if w < 11 || h < 11 {
+        let a: Vec<f64> = a.iter().map(|&v| v as f64).collect();
+        let b: Vec<f64> = b.iter().map(|&v| v as f64).collect();
         let n = a.len() as f64;
         let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
         let va = a.iter().map(|v| (v - ma).powi(2)).sum::<f64>() / n;
@@ -215,21 +210,51 @@ pub fn ssim_plane(a: &[f32], b: &[f32], w: usize, h: usize, range: f64) -> f64 {
             / n;
         return formula(ma, mb, va, vb, cov);
     }
+    const TAPS: usize = 11;
+    const MOMENTS: usize = 5; // a, b, a², b², ab
     let g = gaussian_taps();
-    let prod = |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| p * q).collect::<Vec<f64>>();
-    let ma = filter_valid(&a, w, h, &g);
-    let mb = filter_valid(&b, w, h, &g);
-    let saa = filter_valid(&prod(&a, &a), w, h, &g);
-    let sbb = filter_valid(&prod(&b, &b), w, h, &g);
-    let sab = filter_valid(&prod(&a, &b), w, h, &g);
-    let n = ma.len();
-    (0..n)
-        .map(|i| {
-            let (m1, m2) = (ma[i], mb[i]);
-            formula(m1, m2, saa[i] - m1 * m1, sbb[i] - m2 * m2, sab[i] - m1 * m2)
-        })
-        .sum::<f64>()
-        / n as f64
+    let ow = w - 10;
+    // ring[(slot·5 + moment)·ow ..]: row-filtered moment of input row y, slot = y mod 11.
+    let mut ring = vec![0.0f64; TAPS * MOMENTS * ow];
+    let mut src = vec![0.0f64; MOMENTS * w];
+    let mut col = vec![0.0f64; MOMENTS * ow];
+    let mut total = 0.0;
+    for y in 0..h {
+        let (ra, rb) = (&a[y * w..(y + 1) * w], &b[y * w..(y + 1) * w]);
+        let (sa, rest) = src.split_at_mut(w);
+        let (sb, rest) = rest.split_at_mut(w);
+        let (saa, rest) = rest.split_at_mut(w);
+        let (sbb, sab) = rest.split_at_mut(w);
+        for x in 0..w {
+            let (p, q) = (ra[x] as f64, rb[x] as f64);
+            (sa[x], sb[x], saa[x], sbb[x], sab[x]) = (p, q, p * p, q * q, p * q);
+        }
+        let slot = &mut ring[(y % TAPS) * MOMENTS * ow..][..MOMENTS * ow];
+        for (s, d) in src.chunks_exact(w).zip(slot.chunks_exact_mut(ow)) {
+            filter_row(s, &g, d);
+        }
+        if y + 1 < TAPS {
+            continue;
+        }
+        // Output row y − 10 from input rows y − 10 ..= y, tap t on row y − 10 + t.
+        let y0 = y + 1 - TAPS;
+        col.fill(0.0);
+        for (t, &gt) in g.iter().enumerate() {
+            let slot = &ring[((y0 + t) % TAPS) * MOMENTS * ow..][..MOMENTS * ow];
+            for (c, &r) in col.iter_mut().zip(slot) {
+                *c += gt * r;
+            }
+        }
+        let (ma, rest) = col.split_at(ow);
+        let (mb, rest) = rest.split_at(ow);
+        let (saa, rest) = rest.split_at(ow);
+        let (sbb, sab) = rest.split_at(ow);
+        for x in 0..ow {
+            let (m1, m2) = (ma[x], mb[x]);
+            total += formula(m1, m2, saa[x] - m1 * m1, sbb[x] - m2 * m2, sab[x] - m1 * m2);
+        }
+    }
+    total / (ow * (h - 10)) as f64
 }
 
 #[cfg(test)]
@@ -286,6 +311,55 @@ mod tests {
         let want = ((2.0 * kk * mu2 + c1) * (2.0 * kk * var + c2))
             / (((1.0 + kk * kk) * mu2 + c1) * ((1.0 + kk * kk) * var + c2));
         assert!((s - want).abs() < 1e-9, "{s} vs {want}");
+    }
+
+    /// The direct definition: the 11×11 window g_i·g_j summed in full at every valid pixel.
+    fn ssim_direct(a: &[f32], b: &[f32], w: usize, h: usize, range: f64) -> f64 {
+        let (c1, c2) = ((0.01 * range).powi(2), (0.03 * range).powi(2));
+        let g = gaussian_taps();
+        let mut total = 0.0;
+        for y in 0..h - 10 {
+            for x in 0..w - 10 {
+                let mut m = [0.0f64; 5];
+                for i in 0..11 {
+                    for j in 0..11 {
+                        let wt = g[i] * g[j];
+                        let (p, q) = (a[(y + i) * w + x + j] as f64, b[(y + i) * w + x + j] as f64);
+                        for (acc, v) in m.iter_mut().zip([p, q, p * p, q * q, p * q]) {
+                            *acc += wt * v;
+                        }
+                    }
+                }
+                let [ma, mb, saa, sbb, sab] = m;
+                let (va, vb, cov) = (saa - ma * ma, sbb - mb * mb, sab - ma * mb);
+                total += ((2.0 * ma * mb + c1) * (2.0 * cov + c2))
+                    / ((ma * ma + mb * mb + c1) * (va + vb + c2));
+            }
+        }
+        total / ((w - 10) * (h - 10)) as f64
+    }
+
+    #[test]
+    fn streamed_separable_ssim_matches_the_direct_window() {
+        // Rectangular planes (w ≠ h, both above 11) of unrelated content and a noisy copy.
+        for (w, h, seed) in [(37usize, 23usize, 1u64), (11, 40, 2), (64, 12, 3)] {
+            let a: Vec<f32> = (0..w * h)
+                .map(|i| (((i as u64 * 2654435761 + seed * 97) % 1009) as f32) / 1009.0)
+                .collect();
+            let b: Vec<f32> = a
+                .iter()
+                .enumerate()
+                .map(|(i, v)| 0.8 * v + 0.3 * (((i * 31 + 7) % 13) as f32 / 13.0))
+                .collect();
+            let (fast, direct) = (
+                ssim_plane(&a, &b, w, h, 1.0),
+                ssim_direct(&a, &b, w, h, 1.0),
+            );
+            assert!(
+                (fast - direct).abs() <= 1e-9 * direct.abs(),
+                "{w}×{h}: {fast} vs {direct}"
+            );
+        }
     }
 
     #[test]
