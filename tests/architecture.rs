@@ -32,6 +32,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["wavelet", "tv"],
             &["gap"],
             &["unmix"],
+            &["joint"],
             &["reconstructor"],
             &["metrics"],
         ],

@@ -13,6 +13,7 @@ pub mod error;
 pub mod fft;
 pub mod gap;
 pub mod interrupt;
+pub mod joint;
 pub mod metrics;
 pub mod reconstructor;
 pub mod spectral;
