@@ -27,6 +27,9 @@ pub enum Method {
     Gap,
     /// GAP with a TV denoiser in place of the wavelet shrinkage (Yuan 2016's GAP-TV).
     GapTv,
+    /// No GAP: the joint spectral–spatial reconstruction of α from the frame (`joint.rs`,
+    /// `[reconstruct.joint]`), seeded by the Fourier estimate unmixed.
+    Joint,
 }
 
 /// Settings of `[reconstruct.gap]`. The paper gives no parameter values; the defaults are the
@@ -282,7 +285,7 @@ impl Gap {
     pub fn step(&self, st: &mut GapState) -> f64 {
         let rms = self.project(st);
         match self.cfg.method {
-            Method::Fourier => {}
+            Method::Fourier | Method::Joint => {}
             Method::Gap => self.shrink(st),
             Method::GapTv => {
                 if let Some(tv) = st.tv.as_mut() {
@@ -409,7 +412,7 @@ impl Gap {
             }
         };
         track(&st.estimate, &mut stats);
-        let iterations = if self.cfg.method == Method::Fourier {
+        let iterations = if matches!(self.cfg.method, Method::Fourier | Method::Joint) {
             0
         } else {
             self.cfg.iterations
@@ -438,7 +441,7 @@ pub fn dealias(
     cfg: &GapConfig,
     truth: Option<&Cube>,
 ) -> Result<(Cube, GapStats)> {
-    if cfg.method == Method::Fourier {
+    if matches!(cfg.method, Method::Fourier | Method::Joint) {
         cfg.validate("<gap>")?;
         let stats = GapStats {
             psnr_db: truth.map(|t| vec![psnr(seed, t)]).unwrap_or_default(),

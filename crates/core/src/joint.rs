@@ -97,18 +97,21 @@ pub struct Joint {
     w: usize,
     h: usize,
     j: usize,
-    bands: usize,
     cfg: JointConfig,
     /// a_p = Fᵀ S'(p), pixel-major (J per pixel).
     a: Vec<f32>,
-    /// βB, row-major bands × J.
-    bb: Vec<f32>,
+    /// βB by columns, each padded with zeros to `nbp` (a multiple of 8) bands, so the
+    /// per-pixel products run over whole vector lanes.
+    bcol: Vec<f32>,
+    nbp: usize,
     /// η'Q = η'(D₂B)ᵀ(D₂B), J × J.
     eq: DMatrix<f64>,
     /// ‖K‖ bound: √(8 + β²λmax(BᵀB)).
     norm_k: f64,
     system: DMatrix<f64>,
     basis: DMatrix<f64>,
+    /// (min_k, max_k) of each column of βB: the cheap feasibility bound of `surely_feasible`.
+    col_range: Vec<(f32, f32)>,
     mean_a_norm: f64,
 }
 
@@ -117,8 +120,11 @@ pub struct JointState {
     /// α, pixel-major.
     pub alpha: Vec<f32>,
     bar: Vec<f32>,
-    /// TV dual, pixel-major: (qx_j, qy_j) for j = 0..J.
-    q: Vec<f32>,
+    /// TV dual, pixel-major: qx and qy, J per pixel each.
+    qx: Vec<f32>,
+    qy: Vec<f32>,
+    /// 1 where the constraint dual r is non-zero somewhere in the pixel's bands.
+    active: Vec<u8>,
     /// Constraint dual r ≤ 0, pixel-major (bands per pixel).
     r: Vec<f32>,
     /// Proximal tables: M = (I + τη'Q)⁻¹, m_p = M a_p (J per pixel), t_p = τω_p y_p,
@@ -155,11 +161,12 @@ impl Joint {
                 basis.ncols()
             )));
         }
-        if j > MAX_J {
-            return Err(Error::Shape(format!("joint: J = {j} basis vectors, at most {MAX_J}")));
+        if j > MAX_J || bands > MAX_BANDS {
+            return Err(Error::Shape(format!(
+                "joint: J = {j} basis vectors and {bands} bands, at most {MAX_J} and {MAX_BANDS}"
+            )));
         }
-        if !patterns.all_finite() || system.iter().chain(basis.iter()).any(|v| !v.is_finite())
-        {
+        if !patterns.all_finite() || system.iter().chain(basis.iter()).any(|v| !v.is_finite()) {
             return Err(Error::Numerical(
                 "joint: the patterns, F or B hold a non-finite value".into(),
             ));
@@ -195,18 +202,33 @@ impl Joint {
         // The unmixer weighs ‖x − Fα‖² (data Hessian FᵀF) against η‖D₂Bα‖²; here the data
         // Hessian is a aᵀ, so η is scaled by mean‖a‖² / ‖F‖²_F to keep the same balance.
         let eta_joint = eta * mean_a2 / system.norm_squared();
+        let nbp = bands.div_ceil(LANES) * LANES;
         Ok(Joint {
             w,
             h,
             j,
-            bands,
             cfg: cfg.clone(),
             a,
-            bb: (0..bands)
-                .flat_map(|k| (0..j).map(move |jj| (beta * basis[(k, jj)]) as f32))
+            bcol: (0..j)
+                .flat_map(|jj| {
+                    (0..nbp).map(move |k| {
+                        if k < bands {
+                            (beta * basis[(k, jj)]) as f32
+                        } else {
+                            0.0
+                        }
+                    })
+                })
                 .collect(),
+            nbp,
             eq: eta_joint * d2b.transpose() * &d2b,
             norm_k: 4.0,
+            col_range: (0..j)
+                .map(|jj| {
+                    let col = basis.column(jj) * beta;
+                    (col.min() as f32, col.max() as f32)
+                })
+                .collect(),
             system: system.clone(),
             basis: basis.clone(),
             mean_a_norm,
@@ -268,8 +290,10 @@ impl Joint {
         Ok(JointState {
             bar: alpha.clone(),
             alpha,
-            q: vec![0.0; n * 2 * j],
-            r: vec![0.0; n * self.bands],
+            qx: vec![0.0; n * j],
+            qy: vec![0.0; n * j],
+            active: vec![0; n],
+            r: vec![0.0; n * self.nbp],
             mat: mat32,
             m,
             tck,
@@ -283,117 +307,219 @@ impl Joint {
     }
 
     /// One Chambolle–Pock iteration: the dual steps on ∇ᾱ and βBᾱ, then the primal
-    /// proximal step and the extrapolation ᾱ = 2α⁺ − α.
-    pub fn step(&self, st: &mut JointState) {
-        self.dual_step(st);
+    /// proximal step and the extrapolation ᾱ = 2α⁺ − α. Returns the objective at the α the
+    /// iteration started from (computed in the dual pass, which reads α's rows anyway).
+    pub fn step(&self, st: &mut JointState) -> f64 {
+        let before = self.dual_step(st);
         self.primal_step(st);
+        before
     }
 
-    /// q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel (joint over J and both directions); r ← min(r + σβBᾱ, 0).
-    fn dual_step(&self, st: &mut JointState) {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.bands);
-        let (bar, sigma, lambda, bb) = (&st.bar, st.sigma, st.lambda, &self.bb);
-        st.q.par_chunks_mut(w * 2 * j)
-            .zip(st.r.par_chunks_mut(w * nb))
+    /// q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel (joint over J and both directions);
+    /// r ← min(r + σβBᾱ, 0), skipped where r = 0 and a bound proves βBᾱ ≥ 0.
+    fn dual_step(&self, st: &mut JointState) -> f64 {
+        let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
+        let (bar, alpha, sigma, lambda) = (&st.bar, &st.alpha, st.sigma, st.lambda);
+        let (a, y, om) = (&self.a, &st.y, &st.omega);
+        st.qx
+            .par_chunks_mut(w * j)
+            .zip(st.qy.par_chunks_mut(w * j))
+            .zip(st.r.par_chunks_mut(w * nb).zip(st.active.par_chunks_mut(w)))
+            .zip(st.row_sums.par_iter_mut())
             .enumerate()
-            .for_each(|(yy, (qrow, rrow))| {
-                for x in 0..w {
-                    let p = yy * w + x;
-                    let qp = &mut qrow[x * 2 * j..(x + 1) * 2 * j];
-                    let mut norm2 = 0.0f32;
-                    for jj in 0..j {
-                        let (gx, gy) = gradient(bar, w, h, j, x, yy, jj);
-                        qp[2 * jj] += sigma * gx;
-                        qp[2 * jj + 1] += sigma * gy;
-                        norm2 += qp[2 * jj].powi(2) + qp[2 * jj + 1].powi(2);
+            .for_each_init(
+                || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
+                |(gx, gy), (yy, (((qx, qy), (rrow, act)), sum))| {
+                    row_gradients(alpha, w, h, j, yy, gx, gy);
+                    let mut cost = 0.0f64;
+                    for x in 0..w {
+                        let p = yy * w + x;
+                        let s = x * j..(x + 1) * j;
+                        cost += self.pixel_cost(
+                            &alpha[p * j..(p + 1) * j],
+                            &a[p * j..(p + 1) * j],
+                            y[p],
+                            om[p],
+                            &gx[s.clone()],
+                            &gy[s],
+                            lambda,
+                        );
                     }
-                    let norm = norm2.sqrt();
-                    if norm > lambda {
-                        let s = if lambda > 0.0 { lambda / norm } else { 0.0 };
-                        qp.iter_mut().for_each(|v| *v *= s);
+                    *sum = cost;
+                    row_gradients(bar, w, h, j, yy, gx, gy);
+                    for (qv, g) in qx.iter_mut().zip(gx.iter()) {
+                        *qv += sigma * g;
                     }
-                    let bp = &bar[p * j..(p + 1) * j];
-                    for (k, rk) in rrow[x * nb..(x + 1) * nb].iter_mut().enumerate() {
-                        let v: f32 = bb[k * j..(k + 1) * j]
+                    for (qv, g) in qy.iter_mut().zip(gy.iter()) {
+                        *qv += sigma * g;
+                    }
+                    for x in 0..w {
+                        let s = x * j..(x + 1) * j;
+                        let n2: f32 = qx[s.clone()]
                             .iter()
-                            .zip(bp)
-                            .map(|(b, a)| b * a)
+                            .chain(&qy[s.clone()])
+                            .map(|v| v * v)
                             .sum();
-                        *rk = (*rk + sigma * v).min(0.0);
+                        if n2 > lambda * lambda {
+                            let f = if lambda > 0.0 {
+                                lambda / n2.sqrt()
+                            } else {
+                                0.0
+                            };
+                            qx[s.clone()]
+                                .iter_mut()
+                                .chain(qy[s].iter_mut())
+                                .for_each(|v| *v *= f);
+                        }
+                        let p = yy * w + x;
+                        let bp = &bar[p * j..(p + 1) * j];
+                        if act[x] == 0 && self.surely_feasible(bp) {
+                            continue;
+                        }
+                        let mut u = [0.0f32; MAX_BANDS];
+                        self.basis_times(bp, &mut u[..nb]);
+                        let rp = &mut rrow[x * nb..(x + 1) * nb];
+                        for (rk, uk) in rp.iter_mut().zip(&u[..nb]) {
+                            *rk = (*rk + sigma * uk).min(0.0);
+                        }
+                        act[x] = rp.iter().any(|&v| v < 0.0) as u8;
                     }
-                }
-            });
+                },
+            );
+        st.row_sums.iter().sum()
+    }
+
+    /// u = βBα on the padded bands (a sum of scaled columns: vectorises over the bands).
+    #[inline]
+    fn basis_times(&self, alpha: &[f32], u: &mut [f32]) {
+        u.fill(0.0);
+        for (col, &a) in self.bcol.chunks_exact(self.nbp).zip(alpha) {
+            for (uk, bk) in u.iter_mut().zip(col) {
+                *uk += bk * a;
+            }
+        }
+    }
+
+    /// (βBᵀr)_jj over the padded bands, in `LANES` partial sums (a vectorised dot product).
+    #[inline]
+    fn basis_t_times(&self, jj: usize, r: &[f32]) -> f32 {
+        let col = &self.bcol[jj * self.nbp..(jj + 1) * self.nbp];
+        let mut acc = [0.0f32; LANES];
+        for (c, rr) in col.chunks_exact(LANES).zip(r.chunks_exact(LANES)) {
+            for l in 0..LANES {
+                acc[l] += c[l] * rr[l];
+            }
+        }
+        acc.iter().sum()
+    }
+
+    /// True when min_k Σ_j βB_kj α_j ≥ 0 follows from the per-column extremes of βB alone.
+    #[inline]
+    fn surely_feasible(&self, alpha: &[f32]) -> bool {
+        let lower: f32 = alpha
+            .iter()
+            .zip(&self.col_range)
+            .map(|(&a, &(lo, hi))| if a >= 0.0 { a * lo } else { a * hi })
+            .sum();
+        lower >= 0.0
+    }
+
+    /// One pixel's share of the objective: ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn pixel_cost(
+        &self,
+        alpha: &[f32],
+        a: &[f32],
+        y: f32,
+        om: f32,
+        gx: &[f32],
+        gy: &[f32],
+        lambda: f32,
+    ) -> f64 {
+        let j = self.j;
+        let fit: f64 = a
+            .iter()
+            .zip(alpha)
+            .map(|(u, v)| *u as f64 * *v as f64)
+            .sum();
+        let mut quad = 0.0;
+        for r in 0..j {
+            for c in 0..j {
+                quad += alpha[r] as f64 * self.eq[(r, c)] * alpha[c] as f64;
+            }
+        }
+        let g2: f64 = gx.iter().chain(gy).map(|&g| (g as f64).powi(2)).sum();
+        0.5 * om as f64 * (y as f64 - fit).powi(2) + 0.5 * quad + lambda as f64 * g2.sqrt()
     }
 
     /// α⁺ = prox_{τf}(α − τ(∇ᵀq + βBᵀr)); ᾱ = 2α⁺ − α.
     fn primal_step(&self, st: &mut JointState) {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.bands);
-        let (q, r, bb, tau) = (&st.q, &st.r, &self.bb, st.tau);
+        let (w, j, nb) = (self.w, self.j, self.nbp);
+        let (qx, qy, r, act, tau) = (&st.qx, &st.qy, &st.r, &st.active, st.tau);
         let (mat, m, tck) = (&st.mat, &st.m, &st.tck);
         st.alpha
             .par_chunks_mut(w * j)
             .zip(st.bar.par_chunks_mut(w * j))
             .enumerate()
-            .for_each(|(yy, (arow, brow))| {
-                let mut v = [0.0f32; MAX_J];
-                let mut mv = [0.0f32; MAX_J];
-                for x in 0..w {
-                    let p = yy * w + x;
-                    let rp = &r[p * nb..(p + 1) * nb];
-                    let ap = &mut arow[x * j..(x + 1) * j];
-                    for jj in 0..j {
-                        let div = divergence(q, w, h, j, x, yy, jj);
-                        let btr: f32 = rp.iter().enumerate().map(|(k, rk)| bb[k * j + jj] * rk).sum();
-                        v[jj] = ap[jj] - tau * (btr - div);
+            .for_each_init(
+                || vec![0.0f32; w * j],
+                |div, (yy, (arow, brow))| {
+                    row_divergence(qx, qy, w, j, yy, div);
+                    let mut v = [0.0f32; MAX_J];
+                    let mut mv = [0.0f32; MAX_J];
+                    for x in 0..w {
+                        let p = yy * w + x;
+                        let ap = &mut arow[x * j..(x + 1) * j];
+                        for jj in 0..j {
+                            v[jj] = ap[jj] + tau * div[x * j + jj];
+                        }
+                        if act[p] != 0 {
+                            let rp = &r[p * nb..(p + 1) * nb];
+                            for (jj, vj) in v[..j].iter_mut().enumerate() {
+                                *vj -= tau * self.basis_t_times(jj, rp);
+                            }
+                        }
+                        mat_vec(mat, &v[..j], &mut mv[..j]);
+                        let mp = &m[p * j..(p + 1) * j];
+                        let [t, c, k] = tck[p];
+                        let mtv: f32 = mp.iter().zip(&v[..j]).map(|(a, b)| a * b).sum();
+                        let coef = t - c * (mtv + t * k);
+                        for jj in 0..j {
+                            let new = mv[jj] + coef * mp[jj];
+                            brow[x * j + jj] = 2.0 * new - ap[jj];
+                            ap[jj] = new;
+                        }
                     }
-                    mat_vec(mat, &v[..j], &mut mv[..j]);
-                    let mp = &m[p * j..(p + 1) * j];
-                    let [t, c, k] = tck[p];
-                    let mtv: f32 = mp.iter().zip(&v[..j]).map(|(a, b)| a * b).sum();
-                    let coef = t - c * (mtv + t * k);
-                    for jj in 0..j {
-                        let new = mv[jj] + coef * mp[jj];
-                        brow[x * j + jj] = 2.0 * new - ap[jj];
-                        ap[jj] = new;
-                    }
-                }
-            });
+                },
+            );
     }
 
     /// ½Σω(y − aᵀα)² + ½Σ αᵀη'Qα + λΣ‖∇α‖ at the current α (row sums in f64, fixed order).
     pub fn objective(&self, st: &mut JointState) -> f64 {
         let (w, h, j) = (self.w, self.h, self.j);
-        let eq = &self.eq;
-        let (alpha, a, y, om, lambda) = (&st.alpha, &self.a, &st.y, &st.omega, st.lambda as f64);
-        st.row_sums
-            .par_iter_mut()
-            .enumerate()
-            .for_each(|(yy, sum)| {
-                let mut s = 0.0f64;
-                for x in 0..w {
-                    let p = yy * w + x;
-                    let ap = &alpha[p * j..(p + 1) * j];
-                    let fit: f64 = a[p * j..(p + 1) * j]
-                        .iter()
-                        .zip(ap)
-                        .map(|(u, v)| *u as f64 * *v as f64)
-                        .sum();
-                    s += 0.5 * om[p] as f64 * (y[p] as f64 - fit).powi(2);
-                    let mut quad = 0.0;
-                    for r in 0..j {
-                        for c in 0..j {
-                            quad += ap[r] as f64 * eq[(r, c)] * ap[c] as f64;
-                        }
-                    }
-                    let mut g2 = 0.0f64;
-                    for jj in 0..j {
-                        let (gx, gy) = gradient(alpha, w, h, j, x, yy, jj);
-                        g2 += (gx as f64).powi(2) + (gy as f64).powi(2);
-                    }
-                    s += 0.5 * quad + lambda * g2.sqrt();
-                }
-                *sum = s;
-            });
+        let (alpha, a, y, om, lambda) = (&st.alpha, &self.a, &st.y, &st.omega, st.lambda);
+        st.row_sums.par_iter_mut().enumerate().for_each_init(
+            || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
+            |(gx, gy), (yy, sum)| {
+                row_gradients(alpha, w, h, j, yy, gx, gy);
+                *sum = (0..w)
+                    .map(|x| {
+                        let p = yy * w + x;
+                        let s = x * j..(x + 1) * j;
+                        self.pixel_cost(
+                            &alpha[p * j..(p + 1) * j],
+                            &a[p * j..(p + 1) * j],
+                            y[p],
+                            om[p],
+                            &gx[s.clone()],
+                            &gy[s],
+                            lambda,
+                        )
+                    })
+                    .sum();
+            },
+        );
         st.row_sums.iter().sum()
     }
 
@@ -406,12 +532,12 @@ impl Joint {
     ) -> Result<(Cube, JointStats)> {
         let t0 = Instant::now();
         let mut st = self.start(frame, seed, omega)?;
-        let mut objective = vec![self.objective(&mut st)];
+        let mut objective = Vec::with_capacity(self.cfg.iterations + 1);
         for _ in 0..self.cfg.iterations {
             crate::interrupt::check("the joint reconstruction")?;
-            self.step(&mut st);
-            objective.push(self.objective(&mut st));
+            objective.push(self.step(&mut st));
         }
+        objective.push(self.objective(&mut st));
         if !st.alpha.iter().all(|v| v.is_finite()) {
             return Err(Error::Numerical(format!(
                 "joint: non-finite coefficients after {} iterations",
@@ -436,59 +562,56 @@ impl Joint {
     /// proximal-point method in this metric, so the value never increases along the iterations
     /// (He & Yuan 2012).
     pub fn step_residual(&self, before: &JointState, after: &JointState) -> f64 {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.bands);
-        let n = w * h;
-        let da: Vec<f32> = after.alpha.iter().zip(&before.alpha).map(|(a, b)| a - b).collect();
-        let sq = |u: &[f32], v: &[f32]| -> f64 {
-            u.iter().zip(v).map(|(a, b)| ((a - b) as f64).powi(2)).sum()
+        let d =
+            |u: &[f32], v: &[f32]| -> Vec<f32> { u.iter().zip(v).map(|(a, b)| a - b).collect() };
+        let dot = |u: &[f32], v: &[f32]| -> f64 {
+            u.iter().zip(v).map(|(a, b)| *a as f64 * *b as f64).sum()
         };
-        let mut cross = 0.0f64;
-        for p in 0..n {
-            let (x, yy) = (p % w, p / w);
-            for jj in 0..j {
-                let (gx, gy) = gradient(&da, w, h, j, x, yy, jj);
-                let i = p * 2 * j + 2 * jj;
-                cross += gx as f64 * (after.q[i] - before.q[i]) as f64;
-                cross += gy as f64 * (after.q[i + 1] - before.q[i + 1]) as f64;
-            }
-            for k in 0..nb {
-                let bda: f64 = (0..j)
-                    .map(|jj| self.bb[k * j + jj] as f64 * da[p * j + jj] as f64)
-                    .sum();
-                cross += bda * (after.r[p * nb + k] - before.r[p * nb + k]) as f64;
-            }
+        let da = d(&after.alpha, &before.alpha);
+        let (dqx, dqy, dr) = (
+            d(&after.qx, &before.qx),
+            d(&after.qy, &before.qy),
+            d(&after.r, &before.r),
+        );
+        let (gx, gy, bda) = self.apply_k(&da);
+        dot(&da, &da) / after.tau as f64
+            + (dot(&dqx, &dqx) + dot(&dqy, &dqy) + dot(&dr, &dr)) / after.sigma as f64
+            - 2.0 * (dot(&gx, &dqx) + dot(&gy, &dqy) + dot(&bda, &dr))
+    }
+
+    /// Kα = (∇α, βBα), pixel-major.
+    fn apply_k(&self, alpha: &[f32]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
+        let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
+        let (mut gx, mut gy) = (vec![0.0f32; w * h * j], vec![0.0f32; w * h * j]);
+        for (yy, (rx, ry)) in gx.chunks_mut(w * j).zip(gy.chunks_mut(w * j)).enumerate() {
+            row_gradients(alpha, w, h, j, yy, rx, ry);
         }
-        sq(&after.alpha, &before.alpha) / after.tau as f64
-            + (sq(&after.q, &before.q) + sq(&after.r, &before.r)) / after.sigma as f64
-            - 2.0 * cross
+        let mut bv = vec![0.0f32; w * h * nb];
+        for (ap, u) in alpha.chunks_exact(j).zip(bv.chunks_exact_mut(nb)) {
+            self.basis_times(ap, u);
+        }
+        (gx, gy, bv)
     }
 
     /// ‖K‖² by power iteration on KᵀK (for checking the bound the steps use).
     pub fn power_iteration(&self, iterations: usize) -> f64 {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.bands);
+        let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
         let n = w * h;
-        let mut v: Vec<f32> = (0..n * j).map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.5).collect();
+        let mut v: Vec<f32> = (0..n * j)
+            .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.5)
+            .collect();
         let mut est = 0.0;
+        let mut div = vec![0.0f32; w * j];
         for _ in 0..iterations {
             let norm = v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt();
             v.iter_mut().for_each(|x| *x /= norm as f32);
-            let mut q = vec![0.0f32; n * 2 * j];
-            for p in 0..n {
-                for jj in 0..j {
-                    let (gx, gy) = gradient(&v, w, h, j, p % w, p / w, jj);
-                    q[p * 2 * j + 2 * jj] = gx;
-                    q[p * 2 * j + 2 * jj + 1] = gy;
-                }
-            }
+            let (gx, gy, bv) = self.apply_k(&v);
             let mut out = vec![0.0f32; n * j];
-            for p in 0..n {
-                for jj in 0..j {
-                    let mut s = -divergence(&q, w, h, j, p % w, p / w, jj);
-                    for k in 0..nb {
-                        let bv: f32 = (0..j).map(|i| self.bb[k * j + i] * v[p * j + i]).sum();
-                        s += self.bb[k * j + jj] * bv;
-                    }
-                    out[p * j + jj] = s;
+            for (yy, orow) in out.chunks_mut(w * j).enumerate() {
+                row_divergence(&gx, &gy, w, j, yy, &mut div);
+                for (i, o) in orow.iter_mut().enumerate() {
+                    let p = yy * w + i / j;
+                    *o = self.basis_t_times(i % j, &bv[p * nb..(p + 1) * nb]) - div[i];
                 }
             }
             est = out.iter().zip(&v).map(|(a, b)| (a * b) as f64).sum::<f64>();
@@ -507,7 +630,9 @@ impl Joint {
     pub fn cube(&self, alpha: &Cube, gains: Option<&[f64]>) -> Result<(Cube, f64)> {
         let mut b = rows(&self.basis);
         if let Some(g) = gains {
-            b.iter_mut().zip(g).for_each(|(row, g)| row.iter_mut().for_each(|v| *v *= g));
+            b.iter_mut()
+                .zip(g)
+                .for_each(|(row, g)| row.iter_mut().for_each(|v| *v *= g));
         }
         let mut cube = alpha.mix(&b)?;
         let (lo, hi) = cube
@@ -527,6 +652,10 @@ impl Joint {
 
 /// Largest J the per-pixel kernels handle on the stack.
 pub const MAX_J: usize = crate::unmix::MAX_BASIS;
+/// Largest number of bands (padded) the per-pixel kernels handle on the stack.
+const MAX_BANDS: usize = crate::unmix::MAX_BANDS;
+/// f32 lanes the band loops are padded to (one AVX register).
+const LANES: usize = 8;
 
 /// out = M v for a J × J matrix stored column-major (nalgebra's order; M is symmetric anyway).
 #[inline]
@@ -537,24 +666,43 @@ fn mat_vec(mat: &[f32], v: &[f32], out: &mut [f32]) {
     }
 }
 
-/// Forward differences of coefficient `jj` (pixel-major, J per pixel), zero across the last
-/// column and row (Neumann), as in `tv.rs`.
-#[inline]
-fn gradient(u: &[f32], w: usize, h: usize, j: usize, x: usize, y: usize, jj: usize) -> (f32, f32) {
-    let p = (y * w + x) * j + jj;
-    let gx = if x + 1 < w { u[p + j] - u[p] } else { 0.0 };
-    let gy = if y + 1 < h { u[p + w * j] - u[p] } else { 0.0 };
-    (gx, gy)
+/// Forward differences of row `yy` of a pixel-major field (J per pixel), zero across the last
+/// column and row (Neumann boundaries, as in `tv.rs`).
+fn row_gradients(
+    u: &[f32],
+    w: usize,
+    h: usize,
+    j: usize,
+    yy: usize,
+    gx: &mut [f32],
+    gy: &mut [f32],
+) {
+    let row = &u[yy * w * j..(yy + 1) * w * j];
+    let inner = (w - 1) * j;
+    for (i, g) in gx[..inner].iter_mut().enumerate() {
+        *g = row[i + j] - row[i];
+    }
+    gx[inner..].fill(0.0);
+    if yy + 1 < h {
+        let next = &u[(yy + 1) * w * j..(yy + 2) * w * j];
+        for ((g, a), b) in gy.iter_mut().zip(row).zip(next) {
+            *g = b - a;
+        }
+    } else {
+        gy.fill(0.0);
+    }
 }
 
-/// div q = −∇ᵀq of coefficient `jj` for `gradient`'s differences (q: (qx, qy) per coefficient).
-#[inline]
-fn divergence(q: &[f32], w: usize, h: usize, j: usize, x: usize, y: usize, jj: usize) -> f32 {
-    let p = y * w + x;
-    let at = |p: usize, d: usize| q[p * 2 * j + 2 * jj + d];
-    let dx = if x + 1 < w { at(p, 0) } else { 0.0 } - if x > 0 { at(p - 1, 0) } else { 0.0 };
-    let dy = if y + 1 < h { at(p, 1) } else { 0.0 } - if y > 0 { at(p - w, 1) } else { 0.0 };
-    dx + dy
+/// div q = −∇ᵀq on row `yy` for `row_gradients`' differences; qx must be zero in the last
+/// column and qy in the last row (as every gradient there is).
+fn row_divergence(qx: &[f32], qy: &[f32], w: usize, j: usize, yy: usize, div: &mut [f32]) {
+    let start = yy * w * j;
+    let (qxr, qyr) = (&qx[start..start + w * j], &qy[start..start + w * j]);
+    for (i, d) in div.iter_mut().enumerate() {
+        let left = if i >= j { qxr[i - j] } else { 0.0 };
+        let up = if yy > 0 { qy[start - w * j + i] } else { 0.0 };
+        *d = qxr[i] - left + qyr[i] - up;
+    }
 }
 
 /// A matrix as rows of f64 (the mixing matrices of `Cube::mix`).
@@ -712,7 +860,9 @@ mod tests {
         JointState {
             alpha: s.alpha.clone(),
             bar: s.bar.clone(),
-            q: s.q.clone(),
+            qx: s.qx.clone(),
+            qy: s.qy.clone(),
+            active: s.active.clone(),
             r: s.r.clone(),
             mat: s.mat.clone(),
             m: s.m.clone(),
@@ -751,8 +901,17 @@ mod tests {
             .map(|(a, b)| ((a - b) as f64).powi(2))
             .sum::<f64>()
             .sqrt();
-        let norm = t.data.iter().map(|&v| (v as f64).powi(2)).sum::<f64>().sqrt();
-        eprintln!("relative error {:.3e}, objective {:?}", err / norm, &stats.objective[stats.objective.len() - 3..]);
+        let norm = t
+            .data
+            .iter()
+            .map(|&v| (v as f64).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        eprintln!(
+            "relative error {:.3e}, objective {:?}",
+            err / norm,
+            &stats.objective[stats.objective.len() - 3..]
+        );
         assert!(err / norm < 1e-4, "relative error {:.3e}", err / norm);
         assert!(stats.objective.iter().all(|v| v.is_finite()));
     }
@@ -775,14 +934,20 @@ mod tests {
         y.data.iter_mut().take(32 * 22).for_each(|v| *v = top);
         let (est, st) = j.run(&y, &flat_seed(&t), None).unwrap();
         assert!(est.all_finite() && st.objective.iter().all(|v| v.is_finite()));
-        assert!(st.objective.last().unwrap() < &st.objective[0], "{:?}", st.objective);
+        assert!(
+            st.objective.last().unwrap() < &st.objective[0],
+            "{:?}",
+            st.objective
+        );
         // Two filters alike to 1e-9 (F near-singular): the prior keeps the problem posed.
         let b = basis();
         let mut f = system(&b);
         let row = f.row(0).clone_owned();
         f.set_row(1, &(row * (1.0 + 1e-9)));
         let near = Joint::new(&patterns(32, 32), &f, &b, 1.0, &cfg, "t.toml").unwrap();
-        let (est, st) = near.run(&frame_of(&near, &t), &flat_seed(&t), None).unwrap();
+        let (est, st) = near
+            .run(&frame_of(&near, &t), &flat_seed(&t), None)
+            .unwrap();
         assert!(est.all_finite() && st.objective.iter().all(|v| v.is_finite()));
         // F = 0: the frame says nothing of α; refused with the reason.
         let e = Joint::new(&patterns(32, 32), &(f * 0.0), &b, 1.0, &cfg, "t.toml")
@@ -799,5 +964,4 @@ mod tests {
             .unwrap();
         assert!(e.to_string().contains("reconstruct.joint.tv_weight"), "{e}");
     }
-
 }

@@ -72,6 +72,7 @@ impl Setting {
             Method::Fourier => "fourier".to_string(),
             Method::Gap => format!("gap {} it", self.iterations),
             Method::GapTv => format!("gap-tv {} it", self.iterations),
+            Method::Joint => format!("joint {} it", self.iterations),
         };
         let w = match self.window {
             WindowShape::Square => "square",
@@ -188,8 +189,10 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
     exp.reconstruct.crop = s.crop;
     exp.reconstruct.window = s.window;
     exp.reconstruct.gap.method = s.method;
-    if s.method != Method::Fourier {
-        exp.reconstruct.gap.iterations = s.iterations;
+    match s.method {
+        Method::Fourier => {}
+        Method::Joint => exp.reconstruct.joint.iterations = s.iterations,
+        _ => exp.reconstruct.gap.iterations = s.iterations,
     }
     exp.validate()?;
     Reconstructor::new(
@@ -322,6 +325,7 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
             (0, Method::Fourier, "fourier (crops, windows)"),
             (1, Method::Gap, "gap"),
             (2, Method::GapTv, "gap-tv"),
+            (3, Method::Joint, "joint (PDHG, vectorial TV)"),
         ] {
             let color = Palette99::pick(c).to_rgba();
             let pts: Vec<(f64, f64)> = ok
