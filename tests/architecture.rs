@@ -23,7 +23,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "core",
         &[
             &["error"],
-            &["cube", "spectral"],
+            &["cube", "spectral", "interrupt"],
             &["fft"],
             &["carriers"],
             &["calibration"],
@@ -33,6 +33,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["gap"],
             &["unmix"],
             &["joint"],
+            &["auto"],
             &["reconstructor"],
             &["metrics"],
         ],
@@ -63,7 +64,6 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         &[
             &["error"],
             &["log"],
-            &["signal"],
             &["devices"],
             &["plan"],
             &["patterns"],

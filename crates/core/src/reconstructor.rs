@@ -3,6 +3,7 @@
 //! calibrated carriers, de-alias (GAP on the calibrated patterns), undo the exposure
 //! crosstalk, unmix per pixel. It uses what a real rig knows and nothing else.
 
+use crate::auto::{self, Choice};
 use crate::calibration::{Calibration, MeasuredCarrier};
 use crate::carriers::Carrier;
 use crate::demux::{Demux, WindowShape, SUPER_GAUSSIAN_ORDER};
@@ -80,6 +81,9 @@ pub struct ReconConfig {
     pub crosstalk: CrosstalkCorrection,
     /// Measured weights w_ik (filter i, pattern k); they replace the design's when given.
     pub crosstalk_weights: Option<Vec<Vec<f64>>>,
+    /// Time budget of `gap.method = "auto"` in seconds (default 1 s per 768² frame, scaled by
+    /// pixel count).
+    pub budget_s: Option<f64>,
 }
 
 impl Default for ReconConfig {
@@ -93,6 +97,7 @@ impl Default for ReconConfig {
             joint: Default::default(),
             crosstalk: CrosstalkCorrection::Timing,
             crosstalk_weights: None,
+            budget_s: None,
         }
     }
 }
@@ -126,6 +131,14 @@ impl ReconConfig {
         }
         self.gap.validate(f)?;
         self.joint.validate(f)?;
+        if let Some(b) = self.budget_s.filter(|b| !(b.is_finite() && *b > 0.0)) {
+            return Err(Error::config(
+                f,
+                "reconstruct.budget_s",
+                b,
+                "must be finite and > 0",
+            ));
+        }
         if let Some(w) = &self.crosstalk_weights {
             let n = channels;
             if w.len() != n
@@ -169,6 +182,8 @@ pub struct Reconstructor {
     pub joint: Option<Joint>,
     /// Per-band output gains of a lit radiance scene (the joint method's cube is diag(g)·Bα).
     gains: Option<Vec<f64>>,
+    /// What `method = "auto"` picked and why (None for the other methods).
+    pub auto: Option<Choice>,
     pub unmixer: Unmixer,
     /// M = (Wᵀ)⁻¹: x_i = Σ_k M_ik z_k undoes the exposure crosstalk (None: not corrected).
     pub demix: Option<Vec<Vec<f64>>>,
@@ -185,6 +200,23 @@ impl Reconstructor {
         calibration: &Calibration,
         file: &str,
     ) -> Result<Reconstructor> {
+        if cfg.gap.method == Method::Auto {
+            let pixels = design.width * design.height;
+            let choice = auto::pick(
+                cfg.budget_s.unwrap_or_else(|| auto::default_budget(pixels)),
+                pixels,
+            );
+            let mut resolved = cfg.clone();
+            resolved.gap.method = choice.method;
+            match choice.method {
+                Method::Joint => resolved.joint.iterations = choice.iterations,
+                Method::Fourier => {}
+                _ => resolved.gap.iterations = choice.iterations,
+            }
+            let mut r = Reconstructor::new(&resolved, design, calibration, file)?;
+            r.auto = Some(choice);
+            return Ok(r);
+        }
         let weights = match cfg.crosstalk {
             CrosstalkCorrection::Timing => cfg
                 .crosstalk_weights
@@ -204,7 +236,7 @@ impl Reconstructor {
             .with_calibration(&carriers)?;
         let inv: Vec<f64> = exposed_white.iter().map(|v| 1.0 / v).collect();
         let gap = match cfg.gap.method {
-            Method::Fourier | Method::Joint => None,
+            Method::Fourier | Method::Joint | Method::Auto => None,
             _ => Some(Gap::new(
                 &calibration.patterns.scaled_planes(&inv)?,
                 &cfg.gap,
@@ -239,6 +271,7 @@ impl Reconstructor {
             gap,
             joint,
             gains: design.output_gains.clone(),
+            auto: None,
             unmixer: unmixer(cfg, design).map_err(|e| {
                 e.within(
                     file,
