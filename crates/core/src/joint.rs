@@ -193,7 +193,7 @@ impl Joint {
             / n as f64;
         let btb = basis.transpose() * basis;
         let lmax = nalgebra::SymmetricEigen::new(btb).eigenvalues.max();
-        if !(lmax > 0.0) {
+        if lmax <= 0.0 {
             return Err(Error::Numerical("joint: the basis B is zero".into()));
         }
         // β scales the constraint's block of K to the gradient's norm (‖∇‖² ≤ 8).
