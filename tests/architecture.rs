@@ -32,6 +32,8 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["wavelet", "tv"],
             &["gap"],
             &["unmix"],
+            &["joint"],
+            &["auto"],
             &["reconstructor"],
             &["metrics"],
         ],

@@ -27,6 +27,11 @@ pub enum Method {
     Gap,
     /// GAP with a TV denoiser in place of the wavelet shrinkage (Yuan 2016's GAP-TV).
     GapTv,
+    /// No GAP: the joint spectral–spatial reconstruction of α from the frame (`joint.rs`,
+    /// `[reconstruct.joint]`), seeded by the Fourier estimate unmixed.
+    Joint,
+    /// The best of the others for `[reconstruct] budget_s`, from the measured table (`auto.rs`).
+    Auto,
 }
 
 /// Settings of `[reconstruct.gap]`. The paper gives no parameter values; the defaults are the
@@ -282,7 +287,7 @@ impl Gap {
     pub fn step(&self, st: &mut GapState) -> f64 {
         let rms = self.project(st);
         match self.cfg.method {
-            Method::Fourier => {}
+            Method::Fourier | Method::Joint | Method::Auto => {}
             Method::Gap => self.shrink(st),
             Method::GapTv => {
                 if let Some(tv) = st.tv.as_mut() {
@@ -409,7 +414,10 @@ impl Gap {
             }
         };
         track(&st.estimate, &mut stats);
-        let iterations = if self.cfg.method == Method::Fourier {
+        let iterations = if matches!(
+            self.cfg.method,
+            Method::Fourier | Method::Joint | Method::Auto
+        ) {
             0
         } else {
             self.cfg.iterations
@@ -439,6 +447,14 @@ pub fn dealias(
     cfg: &GapConfig,
     truth: Option<&Cube>,
 ) -> Result<(Cube, GapStats)> {
+    if matches!(cfg.method, Method::Joint | Method::Auto) {
+        return Err(Error::config(
+            "<gap>",
+            "reconstruct.gap.method",
+            format!("{:?}", cfg.method),
+            "dealias runs GAP only; the joint and auto methods run through the Reconstructor",
+        ));
+    }
     if cfg.method == Method::Fourier {
         cfg.validate("<gap>")?;
         let stats = GapStats {

@@ -4,6 +4,7 @@
 //! uniform target); it knows nothing of the simulator. Modules follow the reconstruction:
 //! calibration → demultiplexing → crosstalk → de-aliasing → unmixing → metrics.
 
+pub mod auto;
 pub mod calibration;
 pub mod carriers;
 pub mod crosstalk;
@@ -13,6 +14,7 @@ pub mod error;
 pub mod fft;
 pub mod gap;
 pub mod interrupt;
+pub mod joint;
 pub mod metrics;
 pub mod reconstructor;
 pub mod spectral;

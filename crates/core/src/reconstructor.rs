@@ -3,11 +3,13 @@
 //! calibrated carriers, de-alias (GAP on the calibrated patterns), undo the exposure
 //! crosstalk, unmix per pixel. It uses what a real rig knows and nothing else.
 
+use crate::auto::{self, Choice};
 use crate::calibration::{Calibration, MeasuredCarrier};
 use crate::carriers::Carrier;
 use crate::demux::{Demux, WindowShape, SUPER_GAUSSIAN_ORDER};
 use crate::error::{Error, Result};
 use crate::gap::{Gap, GapConfig, GapStats, Method};
+use crate::joint::{Joint, JointConfig, JointStats};
 use crate::unmix::{UnmixStats, Unmixer};
 use crate::Cube;
 use nalgebra::DMatrix;
@@ -73,10 +75,15 @@ pub struct ReconConfig {
     pub basis: usize,
     /// GAP de-aliasing of the Fourier estimates (`[reconstruct.gap]`; docs/gap.md).
     pub gap: GapConfig,
+    /// The joint reconstruction (`[reconstruct.joint]`), used when `gap.method = "joint"`.
+    pub joint: JointConfig,
     /// Undo the exposure crosstalk between channels before unmixing.
     pub crosstalk: CrosstalkCorrection,
     /// Measured weights w_ik (filter i, pattern k); they replace the design's when given.
     pub crosstalk_weights: Option<Vec<Vec<f64>>>,
+    /// Time budget of `gap.method = "auto"` in seconds (default 1 s per 768² frame, scaled by
+    /// pixel count).
+    pub budget_s: Option<f64>,
 }
 
 impl Default for ReconConfig {
@@ -87,8 +94,10 @@ impl Default for ReconConfig {
             eta: 200.0,
             basis: 6,
             gap: Default::default(),
+            joint: Default::default(),
             crosstalk: CrosstalkCorrection::Timing,
             crosstalk_weights: None,
+            budget_s: None,
         }
     }
 }
@@ -121,6 +130,15 @@ impl ReconConfig {
             ));
         }
         self.gap.validate(f)?;
+        self.joint.validate(f)?;
+        if let Some(b) = self.budget_s.filter(|b| !(b.is_finite() && *b > 0.0)) {
+            return Err(Error::config(
+                f,
+                "reconstruct.budget_s",
+                b,
+                "must be finite and > 0",
+            ));
+        }
         if let Some(w) = &self.crosstalk_weights {
             let n = channels;
             if w.len() != n
@@ -148,6 +166,8 @@ pub struct Reconstruction {
     /// r̂: the cube.
     pub cube: Cube,
     pub gap: GapStats,
+    /// The joint reconstruction's run (None for the other methods).
+    pub joint: Option<JointStats>,
     pub unmix: UnmixStats,
     /// Seconds of linearisation + demultiplexing + crosstalk, of de-aliasing, of unmixing.
     pub seconds: [f64; 3],
@@ -156,8 +176,14 @@ pub struct Reconstruction {
 /// Demultiplexer, de-aliaser and unmixer for one rig, built once and applied to every frame.
 pub struct Reconstructor {
     pub demux: Demux,
-    /// GAP on the calibrated patterns; None for `method = "fourier"`.
+    /// GAP on the calibrated patterns; None for `method = "fourier"` and `"joint"`.
     pub gap: Option<Gap>,
+    /// The joint reconstruction on the calibrated patterns (`method = "joint"`).
+    pub joint: Option<Joint>,
+    /// Per-band output gains of a lit radiance scene (the joint method's cube is diag(g)·Bα).
+    gains: Option<Vec<f64>>,
+    /// What `method = "auto"` picked and why (None for the other methods).
+    pub auto: Option<Choice>,
     pub unmixer: Unmixer,
     /// M = (Wᵀ)⁻¹: x_i = Σ_k M_ik z_k undoes the exposure crosstalk (None: not corrected).
     pub demix: Option<Vec<Vec<f64>>>,
@@ -174,6 +200,23 @@ impl Reconstructor {
         calibration: &Calibration,
         file: &str,
     ) -> Result<Reconstructor> {
+        if cfg.gap.method == Method::Auto {
+            let pixels = design.width * design.height;
+            let choice = auto::pick(
+                cfg.budget_s.unwrap_or_else(|| auto::default_budget(pixels)),
+                pixels,
+            );
+            let mut resolved = cfg.clone();
+            resolved.gap.method = choice.method;
+            match choice.method {
+                Method::Joint => resolved.joint.iterations = choice.iterations,
+                Method::Fourier => {}
+                _ => resolved.gap.iterations = choice.iterations,
+            }
+            let mut r = Reconstructor::new(&resolved, design, calibration, file)?;
+            r.auto = Some(choice);
+            return Ok(r);
+        }
         let weights = match cfg.crosstalk {
             CrosstalkCorrection::Timing => cfg
                 .crosstalk_weights
@@ -191,20 +234,44 @@ impl Reconstructor {
         let demux = Demux::new(design.width, design.height, &design.carriers, cfg.crop)
             .with_window(cfg.window, SUPER_GAUSSIAN_ORDER)?
             .with_calibration(&carriers)?;
+        let inv: Vec<f64> = exposed_white.iter().map(|v| 1.0 / v).collect();
         let gap = match cfg.gap.method {
-            Method::Fourier => None,
-            _ => {
-                let inv: Vec<f64> = exposed_white.iter().map(|v| 1.0 / v).collect();
-                Some(Gap::new(
-                    &calibration.patterns.scaled_planes(&inv)?,
-                    &cfg.gap,
-                    file,
-                )?)
+            Method::Fourier | Method::Joint | Method::Auto => None,
+            _ => Some(Gap::new(
+                &calibration.patterns.scaled_planes(&inv)?,
+                &cfg.gap,
+                file,
+            )?),
+        };
+        let joint = match cfg.gap.method {
+            Method::Joint => {
+                // S'_i = Σ_k w_ik s̃_k: the pattern each channel's light is modulated by.
+                let z_patterns = calibration.patterns.scaled_planes(&inv)?;
+                let channel_patterns = match weights {
+                    Some(w) => z_patterns.mix(w)?,
+                    None => z_patterns,
+                };
+                let eta = cfg.eta / design.band_step_nm.powi(4);
+                Some(
+                    Joint::new(
+                        &channel_patterns,
+                        &design.system,
+                        &design.basis,
+                        eta,
+                        &cfg.joint,
+                        file,
+                    )
+                    .map_err(|e| e.within(file, "reconstruct.gap.method", "\"joint\""))?,
+                )
             }
+            _ => None,
         };
         Ok(Reconstructor {
             demux,
             gap,
+            joint,
+            gains: design.output_gains.clone(),
+            auto: None,
             unmixer: unmixer(cfg, design).map_err(|e| {
                 e.within(
                     file,
@@ -226,6 +293,23 @@ impl Reconstructor {
         let zhat = self.demux.run(&measured)?;
         let xhat = self.to_channels(&zhat)?;
         let t1 = t.elapsed().as_secs_f64();
+        if let Some(j) = &self.joint {
+            let (alpha, mut stats) = j.run(&measured, &self.unconstrained_alpha(&xhat)?, None)?;
+            let t2 = t.elapsed().as_secs_f64();
+            let (cube, violation) = j.cube(&alpha, self.gains.as_deref())?;
+            stats.violation = violation;
+            let xgap = j.channels(&alpha)?;
+            let t3 = t.elapsed().as_secs_f64();
+            return Ok(Reconstruction {
+                xhat,
+                xgap,
+                cube,
+                gap: GapStats::default(),
+                joint: Some(stats),
+                unmix: UnmixStats::default(),
+                seconds: [t1, t2 - t1, t3 - t2],
+            });
+        }
         let (xgap, gap) = match &self.gap {
             Some(g) => {
                 let (z, stats) = g.run(&measured, &zhat, z_truth)?;
@@ -241,6 +325,7 @@ impl Reconstructor {
             xgap,
             cube,
             gap,
+            joint: None,
             unmix,
             seconds: [t1, t2 - t1, t3 - t2],
         })
@@ -257,6 +342,13 @@ impl Reconstructor {
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
         let z = self.demux.run(&self.calibration.linearise(frame)?)?;
         self.to_channels(&z)
+    }
+
+    /// α = H⁻¹Fᵀx per pixel: the unmixing without its constraint (the joint method's seed).
+    pub fn unconstrained_alpha(&self, x: &Cube) -> Result<Cube> {
+        let m = self.unmixer.tables().unconstrained;
+        let c = self.unmixer.channels();
+        x.mix(&m.chunks_exact(c).map(|r| r.to_vec()).collect::<Vec<_>>())
     }
 
     /// x = M·z per pixel (M = (Wᵀ)⁻¹); z unchanged without a correction.

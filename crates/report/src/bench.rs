@@ -6,6 +6,7 @@ use crate::plot;
 use crate::plot::Series;
 use plotters::prelude::*;
 use serde::Serialize;
+use specmux_core::auto;
 use specmux_core::calibration::Calibration;
 use specmux_core::demux::Demux;
 use specmux_core::demux::WindowShape;
@@ -72,6 +73,8 @@ impl Setting {
             Method::Fourier => "fourier".to_string(),
             Method::Gap => format!("gap {} it", self.iterations),
             Method::GapTv => format!("gap-tv {} it", self.iterations),
+            Method::Joint => format!("joint {} it", self.iterations),
+            Method::Auto => "auto".to_string(),
         };
         let w = match self.window {
             WindowShape::Square => "square",
@@ -83,8 +86,8 @@ impl Setting {
 }
 
 /// The default grid: Fourier at three crops × three window shapes, GAP and GAP-TV at
-/// 1, 2, 5, 10, 20, 50 iterations (crop 0.25, square), and both at 20 iterations with the other
-/// two windows.
+/// 1, 2, 5, 10, 20, 50 iterations (crop 0.25, square), both at 20 iterations with the other
+/// two windows, and the joint reconstruction at 10, 20, 40, 80 iterations.
 pub fn default_grid() -> Vec<Setting> {
     let shapes = [
         WindowShape::Square,
@@ -119,6 +122,14 @@ pub fn default_grid() -> Vec<Setting> {
                 window: *window,
             });
         }
+    }
+    for iterations in [10, 20, 40, 80] {
+        g.push(Setting {
+            method: Method::Joint,
+            iterations,
+            crop: 0.25,
+            window: WindowShape::Square,
+        });
     }
     g
 }
@@ -188,8 +199,10 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
     exp.reconstruct.crop = s.crop;
     exp.reconstruct.window = s.window;
     exp.reconstruct.gap.method = s.method;
-    if s.method != Method::Fourier {
-        exp.reconstruct.gap.iterations = s.iterations;
+    match s.method {
+        Method::Fourier => {}
+        Method::Joint => exp.reconstruct.joint.iterations = s.iterations,
+        _ => exp.reconstruct.gap.iterations = s.iterations,
     }
     exp.validate()?;
     Reconstructor::new(
@@ -282,19 +295,23 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
 
 /// Final-cube PSNR against median run time, log time axis (ln t drawn linearly and labelled in
 /// seconds, so that the decade below 1 s gets labels too), one colour per method, the Pareto
-/// front as a line through its points.
-pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Result<()> {
-    plot::register_font(path)?;
-    let err = |e: String| Error::Image {
-        path: path.to_path_buf(),
-        msg: e,
-    };
+/// front as a line through its points, each labelled with its setting, and the setting that
+/// `method = "auto"` picks for this frame size at the default budget ringed.
+pub fn work_precision_plot(
+    path: &Path,
+    title: &str,
+    rows: &[BenchRow],
+    pixels: usize,
+) -> Result<()> {
     let ok: Vec<&BenchRow> = rows
         .iter()
         .filter(|r| r.seconds > 0.0 && r.seconds.is_finite() && r.psnr_db.is_finite())
         .collect();
     if ok.is_empty() {
-        return Err(err("nothing finite to plot".into()));
+        return Err(Error::Image {
+            path: path.to_path_buf(),
+            msg: "nothing finite to plot".into(),
+        });
     }
     let (mut t0, mut t1, mut p0, mut p1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for r in &ok {
@@ -302,30 +319,40 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
         (p0, p1) = (p0.min(r.psnr_db), p1.max(r.psnr_db));
     }
     let pad = 0.05 * (p1 - p0).max(0.1);
-    let (w, h) = (900u32, 560u32);
-    let mut buf = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-        let mut chart = ChartBuilder::on(&root)
+    // What `auto` would pick from these very measurements (the committed table is a copy).
+    let entries: Vec<auto::Entry> = ok
+        .iter()
+        .filter(|r| r.setting.crop == 0.25 && r.setting.window == WindowShape::Square)
+        .map(|r| auto::Entry {
+            method: r.setting.method,
+            iterations: r.setting.iterations,
+            seconds: r.seconds * auto::REFERENCE_PIXELS as f64 / pixels as f64,
+            psnr_db: r.psnr_db,
+        })
+        .collect();
+    let auto = auto::pick_from(&entries, auto::default_budget(pixels), pixels);
+    plot::render_png(path, (1000, 640), |root| {
+        let e = |e: &dyn std::fmt::Display| e.to_string();
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 22))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d((t0 / 1.3).ln()..(t1 * 1.3).ln(), (p0 - pad)..(p1 + pad))
-            .map_err(|e| err(e.to_string()))?;
+            .build_cartesian_2d((t0 / 1.3).ln()..(t1 * 2.5).ln(), (p0 - pad)..(p1 + pad))
+            .map_err(|x| e(&x))?;
         chart
             .configure_mesh()
             .x_labels(12)
             .x_label_formatter(&|v| format!("{:.3}", v.exp()))
-            .x_desc("median wall time of demultiplex + de-alias + unmix, s (log)")
+            .x_desc("median wall time of demultiplex + de-alias/joint + unmix, s (log)")
             .y_desc("final cube PSNR, dB")
             .draw()
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(|x| e(&x))?;
         for (c, method, name) in [
             (0, Method::Fourier, "fourier (crops, windows)"),
             (1, Method::Gap, "gap"),
             (2, Method::GapTv, "gap-tv"),
+            (3, Method::Joint, "joint (PDHG, vectorial TV)"),
         ] {
             let color = Palette99::pick(c).to_rgba();
             let pts: Vec<(f64, f64)> = ok
@@ -335,32 +362,53 @@ pub fn work_precision_plot(path: &Path, title: &str, rows: &[BenchRow]) -> Resul
                 .collect();
             chart
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 5, color.filled())))
-                .map_err(|e| err(e.to_string()))?
+                .map_err(|x| e(&x))?
                 .label(name)
                 .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
         }
-        let mut front: Vec<(f64, f64)> = ok
-            .iter()
-            .filter(|r| r.pareto)
-            .map(|r| (r.seconds.ln(), r.psnr_db))
-            .collect();
-        front.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut front: Vec<&&BenchRow> = ok.iter().filter(|r| r.pareto).collect();
+        front.sort_by(|a, b| a.seconds.total_cmp(&b.seconds));
         chart
-            .draw_series(LineSeries::new(front, BLACK.stroke_width(2)))
-            .map_err(|e| err(e.to_string()))?
-            .label("Pareto front")
+            .draw_series(LineSeries::new(
+                front.iter().map(|r| (r.seconds.ln(), r.psnr_db)),
+                BLACK.stroke_width(2),
+            ))
+            .map_err(|x| e(&x))?
+            .label("Pareto front (labelled)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+        chart
+            .draw_series(front.iter().map(|r| {
+                Text::new(
+                    r.label.replace(", crop 0.25 square", ""),
+                    (r.seconds.ln() + 0.04, r.psnr_db - 0.15 * pad),
+                    ("sans-serif", 13),
+                )
+            }))
+            .map_err(|x| e(&x))?;
+        let picked = ok.iter().filter(|r| {
+            auto.as_ref().is_some_and(|a| {
+                r.setting.method == a.method && r.setting.iterations == a.iterations
+            }) && r.setting.crop == 0.25
+                && r.setting.window == WindowShape::Square
+        });
+        chart
+            .draw_series(
+                picked.map(|r| Circle::new((r.seconds.ln(), r.psnr_db), 11, RED.stroke_width(3))),
+            )
+            .map_err(|x| e(&x))?
+            .label(format!(
+                "method = \"auto\": best within {:.2} s (1 s per 768²)",
+                auto::default_budget(pixels)
+            ))
+            .legend(|(x, y)| Circle::new((x + 10, y), 7, RED.stroke_width(3)));
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::LowerRight)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()
-            .map_err(|e| err(e.to_string()))?;
-        root.present().map_err(|e| err(e.to_string()))?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("plot buffer".into()))?;
-    specmux_io::png::write_png(path, image::DynamicImage::ImageRgb8(img))
+            .map_err(|x| e(&x))
+    })
 }
 
 /// The paper's crop fractions: 0.05 to 0.4 of the width in steps of 0.025.
@@ -654,9 +702,17 @@ mod tests {
                 crop: 0.25,
                 window: WindowShape::Square,
             },
+            Setting {
+                method: Method::Joint,
+                iterations: 30,
+                crop: 0.25,
+                window: WindowShape::Square,
+            },
         ];
         let rows = work_precision(&sim, &grid, 2).unwrap();
-        assert_eq!(rows.len(), 2);
+        assert_eq!(rows.len(), 3);
+        // The joint method beats the Fourier estimate it starts from, through the Reconstructor.
+        assert!(rows[2].psnr_db > rows[0].psnr_db + 1.0, "{rows:?}");
         for r in &rows {
             assert!(
                 r.psnr_db.is_finite()

@@ -267,6 +267,7 @@ pub fn bench(
             scene, sim.frame.width, sim.frame.height
         ),
         &rows,
+        sim.frame.pixels(),
     )?;
     finish(files, out, &mut text)?;
     Ok(text)

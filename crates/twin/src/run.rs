@@ -146,6 +146,10 @@ pub struct RunReport {
     pub calibration: CalibrationReport,
     pub frame: FrameStats,
     pub unmix: UnmixStats,
+    /// The joint reconstruction's objective per iteration, λ, steps and constraint violation.
+    pub joint: Option<specmux_core::joint::JointStats>,
+    /// What `[reconstruct.gap] method = "auto"` picked, and why.
+    pub auto: Option<specmux_core::auto::Choice>,
     /// Where each channel's demultiplexing error comes from (ideal patterns only).
     pub error_budget: Option<Vec<ErrorBudget>>,
     /// What the rig operator should know (timing: exposure not whole turns, rates, spokes).
@@ -256,6 +260,8 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         calibration: CalibrationReport::new(&recon),
         basis,
         unmix: out.unmix,
+        joint: out.joint.clone(),
+        auto: recon.auto.clone(),
         error_budget,
         setup_seconds: t_setup,
         reconstruction_seconds: t_demux + t_gap + t_unmix,
@@ -305,10 +311,15 @@ fn result_rows(
     let m_x = metrics::compare(&sim.channels, &out.xhat)?;
     let m_gap = metrics::compare(&sim.channels, &out.xgap)?;
     let m_bound = metrics::compare(&sim.channels, &bound)?;
-    let gap = format!(
-        "gap ({:?}, {} it)",
-        exp.reconstruct.gap.method, out.gap.iterations
-    );
+    let gap = match (&out.joint, &recon.auto) {
+        (Some(j), None) => format!("joint ({} it)", j.iterations),
+        (Some(j), Some(_)) => format!("auto: joint ({} it)", j.iterations),
+        (None, Some(a)) => format!("auto: {:?} ({} it)", a.method, out.gap.iterations),
+        (None, None) => format!(
+            "gap ({:?}, {} it)",
+            exp.reconstruct.gap.method, out.gap.iterations
+        ),
+    };
     let rows = vec![
         row("demultiplex", "x (true channels)", &m_x, t_demux),
         row(&gap, "x (true channels)", &m_gap, t_gap),
@@ -442,6 +453,19 @@ impl RunReport {
             self.reconstruction_seconds,
             self.total_seconds
         );
+        if let Some(a) = &self.auto {
+            s += &format!("auto: {}\n", a.reason);
+        }
+        if let Some(j) = &self.joint {
+            s += &format!(
+                "joint: {} iterations, λ = {:.3e}, objective {:.4e} → {:.4e}, constraint violation {:.1e} of the peak (clipped)\n",
+                j.iterations,
+                j.lambda,
+                j.objective.first().copied().unwrap_or(f64::NAN),
+                j.objective.last().copied().unwrap_or(f64::NAN),
+                j.violation
+            );
+        }
         s
     }
 }
