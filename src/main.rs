@@ -261,7 +261,7 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             size,
             study,
         } => commands::patterns(&experiment, &out, size, study.as_deref(), lib),
-        Command::Timing { experiment, out } => commands::timing(&experiment, &out),
+        Command::Timing { experiment, out } => commands::timing(&experiment, &out, lib),
         Command::Ptc {
             experiment,
             size,

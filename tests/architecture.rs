@@ -79,7 +79,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["sim"],
             &["run"],
             &["record"],
-            &["reconstruct"],
+            &["reconstruct", "trigger_chain"],
             &["commands"],
         ],
     ),

@@ -12,13 +12,13 @@ use crate::reconstruct::{
 use crate::record::Recorder;
 use crate::run::{self, FrameRecord, Outcome, Sink};
 use crate::sim::{Fault, Faults, SimRig};
-use indicatif::{ProgressBar, ProgressStyle};
+use crate::trigger_chain;
+use indicatif::ProgressBar;
 use specmux_core::calibration::{Calibration, CalibrationFrames};
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_twin::{Experiment, Rig};
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -191,8 +191,10 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
         bar: frame_bar(frames),
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;
-    sink.recorder.finish(&outcome, &sim.events())?;
+    let events = sim.events();
+    sink.recorder.finish(&outcome, &events)?;
     sink.bar.finish_and_clear();
+    trigger_chain::write(&out.join("trigger-chain.png"), &events)?;
     specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
     reconstruct::write_truth_times(out, &sink.truths)?;
     // A rehearsal stopped by a fault reports it below; one stopped by Ctrl-C is an error (exit
@@ -252,16 +254,8 @@ fn outcome_text(o: &Outcome, virtual_s: Option<f64>, wall_s: f64) -> String {
 /// A progress bar of `frames` frames on stderr, drawn only when stderr is a terminal (stdout
 /// stays the report).
 fn frame_bar(frames: usize) -> ProgressBar {
-    if !std::io::stderr().is_terminal() {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(frames as u64);
-    let style = ProgressStyle::with_template(
-        "frames [{bar:40}] {pos}/{len} {elapsed_precise} (eta {eta}) — Ctrl-C stops safely",
-    )
-    .unwrap_or_else(|_| ProgressStyle::default_bar())
-    .progress_chars("=> ");
-    bar.set_style(style);
+    let bar = specmux_report::progress::bar("frames (Ctrl-C stops safely)");
+    bar.set_length(frames as u64);
     bar
 }
 
@@ -345,6 +339,7 @@ fn acquire_in(
     let events = sim.as_ref().map_or_else(|| dev.events(), |s| s.events());
     sink.recorder.finish(&outcome, &events)?;
     sink.bar.finish_and_clear();
+    trigger_chain::write(&out.join("trigger-chain.png"), &events)?;
     if !outcome.completed {
         return Err(stopped_early("acquire", &outcome, out));
     }

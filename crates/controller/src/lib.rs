@@ -17,5 +17,6 @@ pub mod reconstruct;
 pub mod record;
 pub mod run;
 pub mod sim;
+pub mod trigger_chain;
 
 pub use error::{Error, Result};

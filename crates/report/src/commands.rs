@@ -444,7 +444,7 @@ pub fn patterns(
     Ok(text)
 }
 
-pub fn timing(scene: &str, out: &Path) -> Result<String> {
+pub fn timing(scene: &str, out: &Path, lib: &Library) -> Result<String> {
     let mut text = String::new();
     let exp = experiment_for(scene, None)?;
     let cfg = exp.rig.timing.clone().ok_or_else(|| {
@@ -478,7 +478,8 @@ pub fn timing(scene: &str, out: &Path) -> Result<String> {
         );
     }
     let files = OutputSet::begin(out)?;
-    crate::timeline::timeline_png(&cfg, &files.path("timeline.png"))?;
+    let chips = filter_chips(&exp, lib)?;
+    crate::timeline::timeline_png(&cfg, &chips, &files.path("timeline.png"))?;
     specmux_io::json::write_json(&files.path("timing.json"), &tw)?;
     finish(files, out, &mut text)?;
     Ok(text)
@@ -710,4 +711,22 @@ fn read_truth(path: &Path, frame: &specmux_core::Cube, bands: usize) -> Result<s
         });
     }
     Ok(cube)
+}
+
+/// The colour of each wheel filter (its transmittance seen under the scene's illuminant, at full
+/// brightness): the timing figures draw segment i in it.
+pub fn filter_chips(exp: &Experiment, lib: &Library) -> Result<Vec<[u8; 3]>> {
+    let grid = exp.scene.grid(&exp.file)?;
+    let light = exp.curve(lib, &exp.scene.illuminant)?;
+    let col = crate::plot::Colorimetry::new(lib, &grid, Some(&light))?;
+    exp.rig
+        .wheel
+        .filters
+        .iter()
+        .map(|name| {
+            let t = exp.curve(lib, name)?;
+            let spectrum: Vec<f64> = grid.wavelengths().iter().map(|&w| t.eval(w)).collect();
+            Ok(col.chip(&spectrum))
+        })
+        .collect()
 }

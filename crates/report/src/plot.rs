@@ -54,6 +54,11 @@ impl Colorimetry {
         c
     }
 
+    /// The full-brightness colour chip of one spectrum on the grid (see [`chip_srgb`]).
+    pub fn chip(&self, spectrum: &[f64]) -> [u8; 3] {
+        chip_srgb(self.xyz(spectrum.iter().copied()))
+    }
+
     /// An sRGB preview; `exposure` scales Y before the tone curve (1 = white reflector at 1).
     pub fn preview(&self, cube: &Cube, exposure: f64) -> Result<image::RgbImage> {
         if cube.planes != self.xyz.len() {
@@ -75,12 +80,29 @@ impl Colorimetry {
 
 /// XYZ (D65 white, Y = 1 white) → 8-bit sRGB (IEC 61966-2-1): the linear matrix, a clip to the
 /// gamut, then the sRGB transfer curve.
-pub fn xyz_to_srgb([x, y, z]: [f64; 3]) -> [u8; 3] {
-    let lin = [
+pub fn xyz_to_srgb(xyz: [f64; 3]) -> [u8; 3] {
+    encode_srgb(linear_srgb(xyz))
+}
+
+/// The colour of a spectrum at full brightness (its linear sRGB scaled so the largest channel
+/// is 1): a colour chip for a filter, whatever its throughput; black for a spectrum with none.
+pub fn chip_srgb(xyz: [f64; 3]) -> [u8; 3] {
+    let lin = linear_srgb(xyz).map(|v| v.max(0.0));
+    let top = lin.iter().cloned().fold(0.0, f64::max);
+    encode_srgb(if top > 0.0 { lin.map(|v| v / top) } else { lin })
+}
+
+/// XYZ → linear sRGB (IEC 61966-2-1 matrix, D65 white).
+fn linear_srgb([x, y, z]: [f64; 3]) -> [f64; 3] {
+    [
         3.2406 * x - 1.5372 * y - 0.4986 * z,
         -0.9689 * x + 1.8758 * y + 0.0415 * z,
         0.0557 * x - 0.2040 * y + 1.0570 * z,
-    ];
+    ]
+}
+
+/// Linear sRGB, clipped to [0, 1], through the sRGB transfer curve to 8 bits.
+fn encode_srgb(lin: [f64; 3]) -> [u8; 3] {
     lin.map(|v| {
         let v = v.clamp(0.0, 1.0);
         let g = if v <= 0.003_130_8 {
@@ -512,6 +534,25 @@ mod tests {
         assert!(b > 2 * r.max(g), "450 nm: {:?}", [r, g, b]);
         let [r, g, b] = colour_of(band(530.0));
         assert!(g > r.max(b), "530 nm: {:?}", [r, g, b]);
+    }
+
+    #[test]
+    fn a_chip_is_the_hue_at_full_brightness() {
+        // A dim grey filter is white as a chip; a dim red band is as red as a bright one.
+        assert_eq!(chip_srgb([0.1 * 0.9505, 0.1, 0.1 * 1.089]), [255, 255, 255]);
+        let lib = library();
+        let grid = Grid::new(400.0, 10.0, 31).unwrap();
+        let col = Colorimetry::new(&lib, &grid, None).unwrap();
+        let red: Vec<f64> = grid
+            .wavelengths()
+            .iter()
+            .map(|&w| if w >= 600.0 { 1.0 } else { 0.0 })
+            .collect();
+        let dim: Vec<f64> = red.iter().map(|v| 0.05 * v).collect();
+        let [r, g, b] = col.chip(&red);
+        assert_eq!(col.chip(&dim), [r, g, b]);
+        assert!(r == 255 && r > 2 * g.max(b), "{:?}", [r, g, b]);
+        assert_eq!(col.chip(&vec![0.0; grid.count]), [0, 0, 0]);
     }
 
     #[test]

@@ -1,5 +1,6 @@
-//! The timeline plot of one exposure: wheel segment (with spoke mixing), pattern shown and
-//! exposure window, zoomed on the exposure's start and end, with the weight matrix and warnings.
+//! Timing figures: the timeline of one exposure as the timing model predicts it (wheel segment
+//! with spoke mixing, pattern shown, exposure window, zoomed on the exposure's start and end,
+//! with the weight matrix and warnings), and the trigger chain as a run's devices logged it.
 
 use plotters::prelude::*;
 use specmux_core::error::Result;
@@ -11,13 +12,20 @@ const WIDTH: u32 = 1500;
 const PANELS_HEIGHT: u32 = 560;
 const LINE: u32 = 22;
 
-/// Segment/pattern colour i of n (hue wheel, so any n works).
-fn colour(i: usize, n: usize) -> HSLColor {
-    HSLColor(i as f64 / n as f64, 0.65, 0.55)
+/// Segment/pattern colour i: the filter's colour chip when `chips` has one, else a hue wheel.
+fn colour(chips: &[[u8; 3]], i: usize, n: usize) -> RGBColor {
+    match chips.get(i) {
+        Some(&[r, g, b]) => RGBColor(r, g, b),
+        None => {
+            let (r, g, b) = HSLColor(i as f64 / n as f64, 0.65, 0.55).to_rgba().rgb();
+            RGBColor(r, g, b)
+        }
+    }
 }
 
-/// Write the timeline PNG of one exposure of `cfg` to `path` (atomically).
-pub fn timeline_png(cfg: &TimingConfig, path: &Path) -> Result<()> {
+/// Write the timeline PNG of one exposure of `cfg` to `path` (atomically); segment i and its
+/// pattern are drawn in `chips[i]`, the colour of filter i (`plot::Colorimetry::chip`).
+pub fn timeline_png(cfg: &TimingConfig, chips: &[[u8; 3]], path: &Path) -> Result<()> {
     let tw = weights(cfg)?;
     let s = Schedule::new(cfg);
     let text_lines = 3 + s.n + tw.warnings.len();
@@ -44,7 +52,7 @@ pub fn timeline_png(cfg: &TimingConfig, path: &Path) -> Result<()> {
         };
         let panels = top.split_evenly((1, windows.len()));
         for (area, (title, a, b)) in panels.iter().zip(windows) {
-            draw_panel(area, &s, title, a, b, t0, t0 + t).map_err(|e| e.to_string())?;
+            draw_panel(area, &s, chips, title, a, b, (t0, t0 + t)).map_err(|e| e.to_string())?;
         }
         draw_text(&bottom, cfg, &tw).map_err(|e| e.to_string())
     })
@@ -56,11 +64,11 @@ type Area<'a> = crate::plot::Canvas<'a>;
 fn draw_panel(
     area: &Area,
     s: &Schedule,
+    chips: &[[u8; 3]],
     title: &str,
     a: f64,
     b: f64,
-    exp_a: f64,
-    exp_b: f64,
+    (exp_a, exp_b): (f64, f64),
 ) -> std::result::Result<(), Box<dyn std::error::Error>> {
     let ms = 1e3;
     let mut chart = ChartBuilder::on(area)
@@ -89,7 +97,7 @@ fn draw_panel(
                 let top = y + 0.9 * f;
                 rects.push(Rectangle::new(
                     [((t - 0.5 * dt) * ms, y), ((t + 0.5 * dt) * ms, top)],
-                    colour(i, s.n).filled(),
+                    colour(chips, i, s.n).filled(),
                 ));
                 y = top;
             }
@@ -105,7 +113,7 @@ fn draw_panel(
             if v > u {
                 chart.draw_series(std::iter::once(Rectangle::new(
                     [(u * ms, 1.2), (v * ms, 2.0)],
-                    colour(k, s.n).filled(),
+                    colour(chips, k, s.n).filled(),
                 )))?;
                 labels.push((format!("p{k}"), (0.5 * (u + v) * ms, 1.75)));
             }
@@ -180,6 +188,78 @@ fn draw_text(
             (20, 10 + (m as u32 * LINE) as i32),
             style.clone(),
         ))?;
+    }
+    Ok(())
+}
+
+/// One lane of a trigger-chain figure: edges (instants, s) and spans (start, end, s).
+pub struct Lane {
+    pub name: String,
+    pub edges: Vec<f64>,
+    pub spans: Vec<(f64, f64)>,
+}
+
+/// Write the trigger chain of a run as logged (`lanes` top to bottom) in two panels, each a
+/// (title, start s, end s) window: what happened when, as the devices saw it.
+pub fn trigger_chain_png(
+    path: &Path,
+    lanes: &[Lane],
+    windows: &[(String, f64, f64)],
+) -> Result<()> {
+    let height = 70 + 40 * lanes.len() as u32;
+    let size = (WIDTH, height * windows.len() as u32);
+    crate::plot::render_png(path, size, |root| {
+        for (area, (title, a, b)) in root.split_evenly((windows.len(), 1)).iter().zip(windows) {
+            draw_lanes(area, lanes, title, *a, *b).map_err(|e| e.to_string())?;
+        }
+        Ok(())
+    })
+}
+
+/// One window of the trigger chain: a row per lane, edges as ticks, spans as bars.
+fn draw_lanes(
+    area: &Area,
+    lanes: &[Lane],
+    title: &str,
+    a: f64,
+    b: f64,
+) -> std::result::Result<(), Box<dyn std::error::Error>> {
+    let (ms, n) = (1e3, lanes.len() as f64);
+    let mut chart = ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(36)
+        .y_label_area_size(230)
+        .build_cartesian_2d(a * ms..b * ms, -0.5..n - 0.5)?;
+    // Lane r is centred on y = n − 1 − r, so the integer ticks name the lanes.
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(lanes.len())
+        .y_label_formatter(&|y| {
+            let row = n - 1.0 - y.round();
+            match lanes.get(row as usize) {
+                Some(l) if (y - y.round()).abs() < 1e-6 && row >= 0.0 => l.name.clone(),
+                _ => String::new(),
+            }
+        })
+        .x_desc("virtual time (ms)")
+        .label_style(("sans-serif", 14))
+        .draw()?;
+    for (r, lane) in lanes.iter().enumerate() {
+        let (lo, hi) = (n - r as f64 - 1.35, n - r as f64 - 0.65);
+        let colour = crate::plot::series_color(r);
+        let spans = lane.spans.iter().filter(|(u, v)| *v > a && *u < b);
+        chart.draw_series(spans.map(|&(u, v)| {
+            Rectangle::new(
+                [(u.max(a) * ms, lo), (v.min(b) * ms, hi)],
+                colour.mix(0.6).filled(),
+            )
+        }))?;
+        let edges = lane.edges.iter().filter(|t| (a..=b).contains(*t));
+        chart.draw_series(edges.map(|&t| {
+            PathElement::new(vec![(t * ms, lo), (t * ms, hi)], colour.stroke_width(2))
+        }))?;
     }
     Ok(())
 }

@@ -27,7 +27,7 @@ fn timeline_png_is_written() {
     c.wheel.spot_radius_mm = 20.0;
     c.camera.exposure_s = 0.0405;
     let path = temp("timeline.png");
-    timeline_png(&c, &path).unwrap();
+    timeline_png(&c, &[], &path).unwrap();
     let img = image::open(&path).unwrap().to_rgb8();
     assert_eq!(img.width(), 1500);
     // Not blank: the panels drew coloured pixels.
@@ -36,5 +36,50 @@ fn timeline_png_is_written() {
         .filter(|p| p.0.iter().max().unwrap() - p.0.iter().min().unwrap() > 60)
         .count();
     assert!(coloured > 10_000, "{coloured}");
+    std::fs::remove_file(&path).unwrap();
+}
+
+#[test]
+fn timeline_segments_take_the_filters_colours() {
+    let c = TimingConfig::default();
+    let chips: Vec<[u8; 3]> = (0..6).map(|i| [200, 20 + 30 * i as u8, 10]).collect();
+    let path = temp("timeline-chips.png");
+    timeline_png(&c, &chips, &path).unwrap();
+    let img = image::open(&path).unwrap().to_rgb8();
+    for chip in &chips {
+        let n = img.pixels().filter(|p| p.0 == *chip).count();
+        assert!(n > 500, "chip {chip:?}: {n} pixels");
+    }
+    std::fs::remove_file(&path).unwrap();
+}
+
+#[test]
+fn trigger_chain_draws_every_lane_in_its_window() {
+    use specmux_report::timeline::{trigger_chain_png, Lane};
+    let lanes = vec![
+        Lane {
+            name: "wheel index pulse".into(),
+            edges: (0..50).map(|k| k as f64 * 1e-3).collect(),
+            spans: vec![],
+        },
+        Lane {
+            name: "camera exposure".into(),
+            edges: vec![],
+            spans: vec![(0.002, 0.042)],
+        },
+    ];
+    let windows = vec![
+        ("a frame".to_string(), 0.0, 0.05),
+        ("zoom".to_string(), 0.0015, 0.0045),
+    ];
+    let path = temp("trigger-chain.png");
+    trigger_chain_png(&path, &lanes, &windows).unwrap();
+    let img = image::open(&path).unwrap().to_rgb8();
+    assert_eq!((img.width(), img.height()), (1500, 2 * (70 + 80)));
+    let coloured = img
+        .pixels()
+        .filter(|p| p.0.iter().max().unwrap() - p.0.iter().min().unwrap() > 40)
+        .count();
+    assert!(coloured > 20_000, "{coloured}");
     std::fs::remove_file(&path).unwrap();
 }
