@@ -74,11 +74,12 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
         ],
         &["demo/frame.png", "16-bit"],
     );
+    // A TIFF that is not one (a truncated header) names the file.
     std::fs::write(d.join("frame.tif"), b"II*\0").unwrap();
     refused(
         &d,
         &["reconstruct", "frame.tif", "--experiment", "dead-leaves"],
-        &["frame.tif", "TIFF"],
+        &["frame.tif"],
     );
     // A 16-bit PNG holds raw DN: an experiment without a camera cannot read it.
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(64, 64, image::Luma([1000]));
@@ -234,6 +235,28 @@ fn measured_calibration_frames_are_used_by_reconstruct() {
         with > without + 6.0 && (with - twin).abs() < 0.01,
         "with the files {with:.2} dB, without {without:.2} dB, the rig's own {twin:.2} dB"
     );
+    // The same raw frame saved as a 16-bit TIFF, as camera software does, gives the same cube.
+    let (frame, _) = specmux_io::exr::read(&d.join("rec/frame.exr")).unwrap();
+    let dn: Vec<u16> = frame.data.iter().map(|&v| v as u16).collect();
+    assert!(frame.data.iter().zip(&dn).all(|(&v, &n)| v == f32::from(n)));
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(256, 256, dn)
+        .unwrap()
+        .save(d.join("rec/frame.tif"))
+        .unwrap();
+    let mut a = vec![
+        "reconstruct",
+        "rec/frame.tif",
+        "--experiment",
+        "design.toml",
+    ];
+    a.extend([
+        "--truth",
+        "rec/truth.exr",
+        "--calibration",
+        "rec/calibration",
+    ]);
+    let tif = psnr(&ok(&d, &[&a[..], &["--out", "tif"]].concat()));
+    assert_eq!(tif, with, "TIFF {tif} dB against EXR {with} dB");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("with/reconstruct.json")).unwrap())
             .unwrap();

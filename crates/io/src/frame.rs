@@ -1,15 +1,15 @@
 //! Camera frames and calibration frames as a user brings them: one-channel EXR (any units) or
-//! 16-bit greyscale PNG (raw DN). An 8-bit PNG is a preview, not data, and TIFF is not read:
-//! both are refused with what to pass instead.
+//! 16-bit greyscale PNG or TIFF (raw DN, as camera software saves them). An 8-bit image is a
+//! preview, not data: it is refused with what to pass instead.
 
 use crate::exr;
 use specmux_core::calibration::CalibrationFrames;
 use specmux_core::{Cube, Error, Result};
 use std::path::{Path, PathBuf};
 
-/// True when the file holds raw DN (a 16-bit PNG) rather than values in the twin's units.
+/// True when the file holds raw DN (a 16-bit PNG or TIFF) rather than values in the twin's units.
 pub fn is_raw_dn(path: &Path) -> bool {
-    extension(path) == "png"
+    matches!(extension(path).as_str(), "png" | "tif" | "tiff")
 }
 
 fn extension(path: &Path) -> String {
@@ -26,9 +26,8 @@ pub fn read(path: &Path) -> Result<Cube> {
     };
     let frame = match extension(path).as_str() {
         "exr" => exr::read(path)?.0,
-        "png" => read_png16(path)?,
-        "tif" | "tiff" => return Err(bad("TIFF frames are not read: convert the frame to a one-channel EXR or a 16-bit greyscale PNG".into())),
-        e => return Err(bad(format!("`.{e}` is not a frame format specmux reads: pass a one-channel EXR (.exr) or a 16-bit greyscale PNG (.png)"))),
+        "png" | "tif" | "tiff" => read_grey16(path)?,
+        e => return Err(bad(format!("`.{e}` is not a frame format specmux reads: pass a one-channel EXR (.exr) or a 16-bit greyscale PNG or TIFF (.png, .tif)"))),
     };
     if frame.planes != 1 {
         return Err(bad(format!(
@@ -46,8 +45,8 @@ pub fn read(path: &Path) -> Result<Cube> {
     Ok(frame)
 }
 
-/// A 16-bit greyscale PNG as DN.
-fn read_png16(path: &Path) -> Result<Cube> {
+/// A 16-bit greyscale PNG or TIFF as DN.
+fn read_grey16(path: &Path) -> Result<Cube> {
     let bad = |msg: String| Error::Image {
         path: path.to_path_buf(),
         msg,
@@ -55,7 +54,7 @@ fn read_png16(path: &Path) -> Result<Cube> {
     let img = image::open(path).map_err(|e| bad(e.to_string()))?;
     let image::DynamicImage::ImageLuma16(g) = img else {
         return Err(bad(format!(
-            "a {:?} PNG is a preview, not a camera frame: pass frame.exr or a 16-bit greyscale PNG of raw DN",
+            "a {:?} image is a preview, not a camera frame: pass frame.exr or a 16-bit greyscale PNG or TIFF of raw DN",
             img.color()
         )));
     };
@@ -63,9 +62,9 @@ fn read_png16(path: &Path) -> Result<Cube> {
     Cube::from_vec(w, h, 1, g.into_raw().into_iter().map(f32::from).collect())
 }
 
-/// The frame `stem` in `dir` (`.exr`, else `.png`), None when neither exists.
+/// The frame `stem` in `dir` (`.exr`, else `.png`, `.tif`, `.tiff`), None when none exists.
 fn find(dir: &Path, stem: &str) -> Option<PathBuf> {
-    ["exr", "png"]
+    ["exr", "png", "tif", "tiff"]
         .iter()
         .map(|e| dir.join(format!("{stem}.{e}")))
         .find(|p| p.is_file())
@@ -146,4 +145,30 @@ pub fn write_calibration(dir: &Path, frames: &CalibrationFrames) -> Result<()> {
         )?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_16_bit_tiff_reads_as_the_same_dn_as_the_png_and_8_bits_are_refused() {
+        let dir = std::env::temp_dir().join(format!("specmux-frame-tif-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let img =
+            image::ImageBuffer::from_fn(5, 3, |x, y| image::Luma([(x * 1000 + y * 7) as u16]));
+        let (tif, png) = (dir.join("f.tif"), dir.join("f.png"));
+        img.save(&tif).unwrap();
+        img.save(&png).unwrap();
+        let (a, b) = (read(&tif).unwrap(), read(&png).unwrap());
+        assert_eq!((a.width, a.height, a.planes), (5, 3, 1));
+        assert_eq!(a.data, b.data);
+        assert_eq!(a.data[5 + 4], 4007.0);
+        assert!(is_raw_dn(&tif) && is_raw_dn(&dir.join("F.TIFF")));
+        let grey8 = image::GrayImage::from_pixel(4, 4, image::Luma([9]));
+        grey8.save(dir.join("g.tif")).unwrap();
+        let e = read(&dir.join("g.tif")).unwrap_err().to_string();
+        assert!(e.contains("g.tif") && e.contains("preview"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
