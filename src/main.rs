@@ -267,7 +267,7 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             size,
             emva,
             out,
-        } => commands::ptc(experiment.as_deref(), size, emva, &out),
+        } => commands::ptc(experiment.as_deref(), size, emva, &out, lib),
         Command::Design { what } => what.run(lib),
         // A folder is a recording (`specmux acquire`/`rehearse`): its own experiment,
         // calibration and truths are used.

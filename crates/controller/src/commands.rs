@@ -195,7 +195,7 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     sink.recorder.finish(&outcome, &events)?;
     sink.bar.finish_and_clear();
     trigger_chain::write(&out.join("trigger-chain.png"), &events)?;
-    specmux_io::json::write_json(&out.join("rehearsal.json"), &sink.rows)?;
+    specmux_report::commands::write_report(&out.join("rehearsal.json"), lib, "frames", &sink.rows)?;
     reconstruct::write_truth_times(out, &sink.truths)?;
     // A rehearsal stopped by a fault reports it below; one stopped by Ctrl-C is an error (exit
     // status 130), its files written.

@@ -192,7 +192,7 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
         )?;
         rows.push(row);
     }
-    specmux_io::json::write_json(&files.path("reconstruct.json"), &rows)?;
+    specmux_report::commands::write_report(&files.path("reconstruct.json"), lib, "frames", &rows)?;
     let mut text = format!(
         "{}: {} frames reconstructed with its own calibration ({})\n",
         dir.display(),

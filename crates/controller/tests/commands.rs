@@ -69,11 +69,13 @@ fn rehearsing_a_moving_scene_reconstructs_every_frame() {
         text.contains("acquired 3 frames (1 marked)") && text.contains("dmd-underrun"),
         "{text}"
     );
-    let rows: Vec<serde_json::Value> =
+    let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("rehearsal.json")).unwrap())
             .unwrap();
+    assert!(doc["specmux_version"].is_string(), "{doc}");
+    let rows = doc["frames"].as_array().unwrap();
     assert_eq!(rows.len(), 3);
-    for r in &rows {
+    for r in rows {
         assert!(r["psnr_db"].as_f64().unwrap() > 15.0, "{r}");
     }
     let (xml, pages) = ome::read(&out.join("frames.ome.tif")).unwrap();
@@ -159,8 +161,11 @@ fn a_rehearsal_folder_reconstructs_to_the_errors_the_rehearsal_reported() {
     let out = rec.with_file_name("replay-out");
     let text = reconstruct_recording(&rec, &out, &common::lib()).unwrap();
     assert!(text.contains("3 frames reconstructed"), "{text}");
+    // The frame rows of a report (beside its version and provenance).
     let read = |p: PathBuf| -> Vec<serde_json::Value> {
-        serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap()
+        let doc: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        doc["frames"].as_array().unwrap().clone()
     };
     let (rehearsed, replayed) = (
         read(rec.join("rehearsal.json")),

@@ -455,7 +455,7 @@ pub fn run(a: &CarrierArgs, lib: &Library) -> Result<String> {
     let d = design(a, lib)?;
     let mut t = layout_table(&d);
     t += &crosstalk_table(&d);
-    t += &write_outputs(a, &d)?;
+    t += &write_outputs(a, &d, lib)?;
     let times: Vec<String> = d
         .seconds
         .iter()
@@ -557,7 +557,7 @@ fn crosstalk_table(d: &CarrierDesign) -> String {
 }
 
 /// The Fourier-plane PNGs, `carriers.toml`, `experiment.toml` and `report.json`.
-fn write_outputs(a: &CarrierArgs, d: &CarrierDesign) -> Result<String> {
+fn write_outputs(a: &CarrierArgs, d: &CarrierDesign, lib: &Library) -> Result<String> {
     let mut t = String::from("\n");
     let c = &d.candidates[d.chosen];
     let shape = serde_json::to_value(c.window)
@@ -608,7 +608,7 @@ fn write_outputs(a: &CarrierArgs, d: &CarrierDesign) -> Result<String> {
         plot::fourier_plane(&path, &title, &c.layout, &d.spectrum)?;
         t += &format!("wrote {}\n", path.display());
     }
-    specmux_io::json::write_json(&a.out.join("report.json"), d)?;
+    specmux_report::commands::write_report(&a.out.join("report.json"), lib, "design", d)?;
     t += &format!(
         "wrote {} and {}\n",
         a.out.join("carriers.toml").display(),

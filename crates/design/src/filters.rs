@@ -453,7 +453,7 @@ fn write_outputs(
         chosen: &c.label,
         seconds: seconds.to_vec(),
     };
-    specmux_io::json::write_json(&a.out.join("report.json"), &report)?;
+    specmux_report::commands::write_report(&a.out.join("report.json"), lib, "design", &report)?;
     let _ = writeln!(
         text,
         "wrote {} and {}",

@@ -259,7 +259,7 @@ pub fn bench(
     say!(text, "{md}");
     let files = OutputSet::begin(out)?;
     specmux_io::atomic::write_bytes(&files.path("bench.md"), md.as_bytes())?;
-    specmux_io::json::write_json(&files.path("bench.json"), &rows)?;
+    write_report(&files.path("bench.json"), lib, "rows", &rows)?;
     crate::bench::work_precision_plot(
         &files.path("pareto.png"),
         &format!(
@@ -310,7 +310,7 @@ pub fn sweep_crop(
     }
     let files = OutputSet::begin(out)?;
     specmux_io::atomic::write_bytes(&files.path("sweep.md"), md.as_bytes())?;
-    specmux_io::json::write_json(&files.path("sweep.json"), &rows)?;
+    write_report(&files.path("sweep.json"), lib, "rows", &rows)?;
     crate::bench::sweep_plot(&files.path("sweep_crop.png"), &rows)?;
     finish(files, out, &mut text)?;
     Ok(text)
@@ -340,7 +340,7 @@ pub fn sweep(
     );
     let files = OutputSet::begin(out)?;
     specmux_io::atomic::write_bytes(&files.path("sweep.md"), md.as_bytes())?;
-    specmux_io::json::write_json(&files.path("sweep.json"), &rows)?;
+    write_report(&files.path("sweep.json"), lib, "rows", &rows)?;
     finish(files, out, &mut text)?;
     Ok(text)
 }
@@ -379,7 +379,7 @@ pub fn patterns(
         );
         let files = OutputSet::begin(out)?;
         specmux_io::atomic::write_bytes(&files.path("study.md"), md.as_bytes())?;
-        specmux_io::json::write_json(&files.path("study.json"), &rows)?;
+        write_report(&files.path("study.json"), lib, "rows", &rows)?;
         finish(files, out, &mut text)?;
         return Ok(text);
     }
@@ -439,7 +439,7 @@ pub fn patterns(
     }
     let files = OutputSet::begin(out)?;
     pr::write_pattern_pngs(&set, &rig.carriers, files.dir())?;
-    specmux_io::json::write_json(&files.path("patterns.json"), &rep)?;
+    write_report(&files.path("patterns.json"), lib, "patterns", &rep)?;
     finish(files, out, &mut text)?;
     Ok(text)
 }
@@ -480,14 +480,20 @@ pub fn timing(scene: &str, out: &Path, lib: &Library) -> Result<String> {
     let files = OutputSet::begin(out)?;
     let chips = filter_chips(&exp, lib)?;
     crate::timeline::timeline_png(&cfg, &chips, &files.path("timeline.png"))?;
-    specmux_io::json::write_json(&files.path("timing.json"), &tw)?;
+    write_report(&files.path("timing.json"), lib, "timing", &tw)?;
     finish(files, out, &mut text)?;
     Ok(text)
 }
 
 /// `specmux ptc`: the EMVA 1288 photon-transfer measurement of the experiment's camera; with
 /// `emva`, its raw frames too, as the EMVA 1288 reference code reads them (`emva1288/`).
-pub fn ptc(scene: Option<&str>, size: usize, emva: bool, out: &Path) -> Result<String> {
+pub fn ptc(
+    scene: Option<&str>,
+    size: usize,
+    emva: bool,
+    out: &Path,
+    lib: &Library,
+) -> Result<String> {
     let mut text = String::new();
     let cfg = match scene {
         Some(s) => experiment_for(s, None)?.rig.sensor.unwrap_or_default(),
@@ -528,11 +534,10 @@ pub fn ptc(scene: Option<&str>, size: usize, emva: bool, out: &Path) -> Result<S
     );
     let files = OutputSet::begin(out)?;
     crate::ptc::plot_ptc(&r, &files.path("ptc.png"))?;
-    let report = serde_json::json!({
-        "camera": cfg,
-        "dark_electrons_per_exposure": sensor.dark_electrons(),
-        "measured": r,
-    });
+    let mut report = serde_json::json!(run::Provenance::new(lib));
+    report["camera"] = serde_json::json!(cfg);
+    report["dark_electrons_per_exposure"] = serde_json::json!(sensor.dark_electrons());
+    report["measured"] = serde_json::json!(r);
     specmux_io::json::write_json(&files.path("ptc.json"), &report)?;
     if emva {
         let frames = specmux_twin::sensor::ptc_frames(&sensor, &levels, &r)?;
@@ -572,7 +577,7 @@ pub fn simulate(
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         specmux_io::frame::write_calibration(&dir, &frames)?;
     }
-    specmux_io::json::write_json(&files.path("simulate.json"), &times)?;
+    write_report(&files.path("simulate.json"), lib, "stages", &times)?;
     for t in &times {
         say!(text, "{:<15} {:>8.4} s", t.stage, t.seconds);
     }
@@ -729,4 +734,17 @@ pub fn filter_chips(exp: &Experiment, lib: &Library) -> Result<Vec<[u8; 3]>> {
             Ok(col.chip(&spectrum))
         })
         .collect()
+}
+
+/// Write a command's JSON file with the version and library provenance every report carries
+/// (docs/report-schema.md): the keys of `run::Provenance`, then `key` holding `body`.
+pub fn write_report(
+    path: &Path,
+    lib: &Library,
+    key: &str,
+    body: &impl serde::Serialize,
+) -> Result<()> {
+    let mut doc = serde_json::json!(run::Provenance::new(lib));
+    doc[key] = serde_json::json!(body);
+    specmux_io::json::write_json(path, &doc)
 }
