@@ -109,6 +109,8 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["backend"],
             &["fft"],
             &["demux"],
+            &["wavelet", "select", "tv", "mix"],
+            &["gap"],
             &["unmix"],
             &["reconstructor"],
         ],
