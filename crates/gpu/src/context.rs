@@ -53,6 +53,11 @@ impl GpuContext {
         )
     }
 
+    /// The adapter's own name, e.g. "NVIDIA H100 80GB HBM3" or "llvmpipe (LLVM 15.0.6, 256 bits)".
+    pub fn name(&self) -> &str {
+        &self.info.name
+    }
+
     /// True for a software rasteriser (lavapipe, WARP): timings from it say nothing of a GPU.
     pub fn is_software(&self) -> bool {
         self.info.device_type == wgpu::DeviceType::Cpu

@@ -10,6 +10,7 @@ pub mod context;
 pub mod demux;
 pub mod error;
 pub mod fft;
+pub mod fft_backend;
 pub mod gap;
 pub mod mix;
 pub mod reconstructor;

@@ -192,6 +192,20 @@ impl Device {
         }
         format!("CPU, {} threads", rayon::current_num_threads())
     }
+
+    /// `describe` short enough for a plot's title: the adapter's name up to its first
+    /// parenthesis, and "software" for a software adapter.
+    pub fn short(&self) -> String {
+        #[cfg(feature = "gpu")]
+        if let Some(ctx) = &self.gpu {
+            let name = ctx.name().split(" (").next().unwrap_or("");
+            return match ctx.is_software() {
+                true => format!("GPU {name} (software: not a GPU's speed)"),
+                false => format!("GPU {name}"),
+            };
+        }
+        self.describe()
+    }
 }
 
 /// One setting's reconstruction on the device it runs on.

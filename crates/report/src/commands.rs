@@ -260,7 +260,7 @@ pub fn bench(
             scene,
             sim.frame.width,
             sim.frame.height,
-            device.describe()
+            device.short()
         ),
         &rows,
         sim.frame.pixels(),
