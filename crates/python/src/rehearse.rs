@@ -28,20 +28,20 @@ use std::path::PathBuf;
 /// check raises `SpecmuxError` (except in a dry run, which reports it). The GIL is released
 /// while it runs.
 #[pyfunction]
-#[pyo3(signature = (exp, frames = 100, faults = Vec::new(), dry_run = false, cubes = false, out = None, spectra = None))]
+#[pyo3(signature = (exp, frames = 100, faults = None, dry_run = false, cubes = false, out = None, spectra = None))]
 #[allow(clippy::too_many_arguments)]
 pub fn rehearse<'py>(
     py: Python<'py>,
     exp: &PyExperiment,
     frames: usize,
-    faults: Vec<String>,
+    faults: Option<Vec<String>>,
     dry_run: bool,
     cubes: bool,
     out: Option<PathBuf>,
     spectra: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let e = exp.inner.clone();
-    let faults = controller::faults(&faults).map_err(err)?;
+    let faults = controller::faults(&faults.unwrap_or_default()).map_err(err)?;
     let dir = OutDir::new(out, "rehearse");
     let (plan, text) = controller::rehearsal_plan(&e, frames, &dir.path);
     let d = PyDict::new(py);
