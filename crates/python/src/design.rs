@@ -4,7 +4,7 @@
 //! candidates with their scores (`report.json`), the TOML section and the printed text.
 
 use crate::convert::{library, to_py, OutDir};
-use crate::error::err;
+use crate::error::{err, interruptible};
 use clap::{Args, FromArgMatches};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList, PyTuple};
@@ -95,7 +95,7 @@ pub fn design_filters<'py>(
     let dir = OutDir::new(out, "design-filters");
     let a: FilterArgs = parse("design filters", argv(options)?, &dir)?;
     let lib = library(spectra);
-    let text = py.detach(move || filters::run(&a, &lib)).map_err(err)?;
+    let text = interruptible(py, move || filters::run(&a, &lib))?.map_err(err)?;
     let (mut design, provenance) = report(&dir)?;
     let d = PyDict::new(py);
     let rest = design
@@ -168,7 +168,7 @@ pub fn design_carriers<'py>(
     let dir = OutDir::new(out, "design-carriers");
     let a: CarrierArgs = parse("design carriers", argv(options)?, &dir)?;
     let lib = library(spectra);
-    let text = py.detach(move || carriers::run(&a, &lib)).map_err(err)?;
+    let text = interruptible(py, move || carriers::run(&a, &lib))?.map_err(err)?;
     let (mut design, provenance) = report(&dir)?;
     let d = PyDict::new(py);
     let rest = design

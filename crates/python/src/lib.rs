@@ -5,7 +5,8 @@
 //! order of `specmux_core::Cube` — and frames float32 arrays of shape (height, width).
 //!
 //! Every function calls the library function its CLI command calls. Long work runs with the
-//! GIL released (`Python::detach`, PyO3's name for what was `allow_threads`). Every library
+//! GIL released on a worker thread, and a Ctrl-C stops it at its next safe point
+//! (`error::interruptible`, raised as `KeyboardInterrupt`). Every library
 //! error is raised as `specmux.SpecmuxError` carrying the library's one-line message.
 
 mod calibration;

@@ -3,7 +3,7 @@
 
 use crate::calibration;
 use crate::convert::{cube_array, is_integer, library, to_cube, to_frame, to_py};
-use crate::error::err;
+use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -43,20 +43,19 @@ pub fn reconstruct<'py>(
         .map(|c| calibration::from_dict(c, frame.width, frame.height))
         .transpose()?;
     let lib = library(spectra);
-    let (out, cal) = py
-        .detach(move || -> specmux_core::Result<_> {
-            let materials = Materials::load(&lib)?;
-            let rig = Rig::build(&e, &lib, &materials)?;
-            let measured = measured.as_ref().map(|frames| Measured {
-                frames,
-                place: "reconstruct",
-                key: "calibration",
-            });
-            let cal = frame_calibration(&e, &rig, &materials, measured)?;
-            let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
-            Ok((recon.run(&frame, None)?, cal))
-        })
-        .map_err(err)?;
+    let (out, cal) = interruptible(py, move || -> specmux_core::Result<_> {
+        let materials = Materials::load(&lib)?;
+        let rig = Rig::build(&e, &lib, &materials)?;
+        let measured = measured.as_ref().map(|frames| Measured {
+            frames,
+            place: "reconstruct",
+            key: "calibration",
+        });
+        let cal = frame_calibration(&e, &rig, &materials, measured)?;
+        let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
+        Ok((recon.run(&frame, None)?, cal))
+    })?
+    .map_err(err)?;
     if !full {
         return Ok(cube_array(py, out.cube)?.into_any());
     }

@@ -3,7 +3,7 @@
 //! virtual clock, each frame reconstructed with the calibration acquired in the same run.
 
 use crate::convert::{cube_array, library, to_py, OutDir};
-use crate::error::err;
+use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -56,9 +56,10 @@ pub fn rehearse<'py>(
     }
     let lib = library(spectra);
     let path = dir.path.clone();
-    let r: Rehearsed = py
-        .detach(move || controller::rehearsal(&e, &plan, faults, &path, cubes, &lib))
-        .map_err(err)?;
+    let r: Rehearsed = interruptible(py, move || {
+        controller::rehearsal(&e, &plan, faults, &path, cubes, &lib)
+    })?
+    .map_err(err)?;
     d.set_item("text", text + &r.text())?;
     d.set_item("frames", to_py(py, &r.rows)?)?;
     let arrays = r

@@ -3,7 +3,7 @@
 
 use crate::calibration;
 use crate::convert::{cube_array, frame_array, library, to_py};
-use crate::error::err;
+use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -32,17 +32,16 @@ pub fn simulate<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let e = exp.inner.clone();
     let lib = library(spectra);
-    let (sim, stages, frames) = py
-        .detach(move || -> specmux_core::Result<_> {
-            let materials = Materials::load(&lib)?;
-            let rig = Rig::build(&e, &lib, &materials)?;
-            let (sim, stages) = Pipeline::build(&e, &rig, &materials)?.run()?;
-            let frames = (e.calibration.source == CalibrationSource::Captures)
-                .then(|| specmux_twin::run::calibration_frames(&e, &rig, &sim))
-                .transpose()?;
-            Ok((sim, stages, frames))
-        })
-        .map_err(err)?;
+    let (sim, stages, frames) = interruptible(py, move || -> specmux_core::Result<_> {
+        let materials = Materials::load(&lib)?;
+        let rig = Rig::build(&e, &lib, &materials)?;
+        let (sim, stages) = Pipeline::build(&e, &rig, &materials)?.run()?;
+        let frames = (e.calibration.source == CalibrationSource::Captures)
+            .then(|| specmux_twin::run::calibration_frames(&e, &rig, &sim))
+            .transpose()?;
+        Ok((sim, stages, frames))
+    })?
+    .map_err(err)?;
     let d = PyDict::new(py);
     let stages: Vec<(String, f64)> = stages
         .into_iter()
@@ -75,9 +74,7 @@ pub fn run<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let e = exp.inner.clone();
     let lib = library(spectra);
-    let (rep, data) = py
-        .detach(move || specmux_twin::run::run(&e, &lib))
-        .map_err(err)?;
+    let (rep, data) = interruptible(py, move || specmux_twin::run::run(&e, &lib))?.map_err(err)?;
     let d = PyDict::new(py);
     d.set_item("report", to_py(py, &rep)?)?;
     d.set_item("table", rep.table())?;
