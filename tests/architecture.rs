@@ -126,8 +126,17 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["commands"],
         ],
     ),
-    // The Python bindings are one file (src/lib.rs, the crate root): no modules to order.
-    ("python", &[]),
+    // The Python bindings: the exception, the conversions at the boundary, the experiment and
+    // the calibration-frame dicts, then one module per group of functions.
+    (
+        "python",
+        &[
+            &["error"],
+            &["convert"],
+            &["experiment", "calibration"],
+            &["simulate", "reconstruct", "design", "rehearse"],
+        ],
+    ),
 ];
 
 /// Crates that `crates/core` must not depend on.

@@ -79,7 +79,7 @@ fn plan_for(exp: &Experiment, frames: usize, limits: &DeviceLimits, out: &Path) 
 }
 
 /// The verdict of a dry run: nothing is sent to any device.
-fn dry_run(plan: &Plan, mut text: String) -> String {
+pub fn dry_run(plan: &Plan, mut text: String) -> String {
     match plan.verify() {
         Ok(()) => say!(
             text,
@@ -99,6 +99,8 @@ struct Rehearsal<'a> {
     rig: Rig,
     recon: Option<Reconstructor>,
     rows: Vec<ReconstructedFrame>,
+    /// Each frame's cube, when the caller keeps them (Python's `rehearse(cubes=True)`).
+    cubes: Option<Vec<Cube>>,
     /// When each frame's truth was in front of the camera, for `truth.json`.
     truths: Vec<TruthTime>,
     bar: ProgressBar,
@@ -140,8 +142,11 @@ impl Sink for Rehearsal<'_> {
             frame_id: r.frame_id,
             scene_t_s: self.sim.scene_time_s(frame),
         });
-        self.rows
-            .push(reconstruct_frame(recon, &f, Some(&truth))?.1);
+        let (cube, row) = reconstruct_frame(recon, &f, Some(&truth))?;
+        self.rows.push(row);
+        if let Some(c) = &mut self.cubes {
+            c.push(cube);
+        }
         self.bar.inc(1);
         Ok(())
     }
@@ -152,7 +157,7 @@ impl Sink for Rehearsal<'_> {
 }
 
 /// Parse `--fault KIND@N` arguments.
-fn faults(specs: &[String]) -> Result<Faults> {
+pub fn faults(specs: &[String]) -> Result<Faults> {
     Ok(Faults(
         specs
             .iter()
@@ -169,44 +174,90 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 }
 
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
-    let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
+    let exp = Experiment::load(&o.experiment)?;
     let faults = faults(&o.faults)?;
-    let (plan, text) = plan_for(&exp, frames, &DeviceLimits::of_twin(&exp), out);
-    if dry {
+    let (plan, text) = rehearsal_plan(&exp, o.frames, out);
+    if o.dry_run {
         return Ok(dry_run(&plan, text));
     }
+    let r = rehearsal(&exp, &plan, faults, out, false, lib)?;
+    // A rehearsal stopped by a fault reports it below; one stopped by Ctrl-C is an error (exit
+    // status 130), its files written.
+    if !r.outcome.completed && r.outcome.stopped_because.is_none() {
+        return Err(stopped_early("rehearse", &r.outcome, out));
+    }
+    let mut text = text + &r.text();
+    say!(text, "wrote {}", out.display());
+    Ok(text)
+}
+
+/// The plan of a rehearsal of `frames` frames recorded into `out`, on the twin's devices, with
+/// the text `rehearse` prints of it: summary, checks, expected timeline.
+pub fn rehearsal_plan(exp: &Experiment, frames: usize, out: &Path) -> (Plan, String) {
+    plan_for(exp, frames, &DeviceLimits::of_twin(exp), out)
+}
+
+/// What a rehearsal did: each frame's error and time (and cube when kept), the outcome, the
+/// devices' event log, and its virtual and wall time.
+pub struct Rehearsed {
+    pub rows: Vec<ReconstructedFrame>,
+    /// Each frame's cube in the order of `rows`; empty unless asked for.
+    pub cubes: Vec<Cube>,
+    pub outcome: Outcome,
+    pub events: Vec<crate::log::Event>,
+    pub virtual_s: f64,
+    pub wall_s: f64,
+}
+
+impl Rehearsed {
+    /// The per-frame table and the outcome, as `rehearse` prints them after the plan.
+    pub fn text(&self) -> String {
+        frame_table(&self.rows) + &outcome_text(&self.outcome, Some(self.virtual_s), self.wall_s)
+    }
+}
+
+/// Run `plan` (checked first) on the simulated rig with `faults`, recording into `out` and
+/// reconstructing every frame with the calibration acquired in the same run; `keep_cubes` keeps
+/// each frame's cube in memory.
+pub fn rehearsal(
+    exp: &Experiment,
+    plan: &Plan,
+    faults: Faults,
+    out: &Path,
+    keep_cubes: bool,
+    lib: &Library,
+) -> Result<Rehearsed> {
     plan.verify()?;
     let wall = Instant::now();
-    let (sim, rig) = SimRig::new(&exp, lib, faults)?;
+    let (sim, rig) = SimRig::new(exp, lib, faults)?;
     let mut dev = sim.devices();
-    let recorder = Recorder::create(out, &plan, &exp)?;
+    let recorder = Recorder::create(out, plan, exp)?;
     let mut sink = Rehearsal {
         recorder,
         sim: sim.clone(),
-        exp: &exp,
+        exp,
         rig,
         recon: None,
         rows: Vec::new(),
+        cubes: keep_cubes.then(Vec::new),
         truths: Vec::new(),
-        bar: frame_bar(frames),
+        bar: frame_bar(plan.settings.frames),
     };
-    let outcome = run::run(&plan, &mut dev, &mut sink)?;
+    let outcome = run::run(plan, &mut dev, &mut sink)?;
     let events = sim.events();
     sink.recorder.finish(&outcome, &events)?;
     sink.bar.finish_and_clear();
     trigger_chain::write(&out.join("trigger-chain.png"), &events)?;
     specmux_report::commands::write_report(&out.join("rehearsal.json"), lib, "frames", &sink.rows)?;
     reconstruct::write_truth_times(out, &sink.truths)?;
-    // A rehearsal stopped by a fault reports it below; one stopped by Ctrl-C is an error (exit
-    // status 130), its files written.
-    if !outcome.completed && outcome.stopped_because.is_none() {
-        return Err(stopped_early("rehearse", &outcome, out));
-    }
-    let mut text = text;
-    text += &frame_table(&sink.rows);
-    text += &outcome_text(&outcome, Some(sim.now_s()), wall.elapsed().as_secs_f64());
-    say!(text, "wrote {}", out.display());
-    Ok(text)
+    Ok(Rehearsed {
+        rows: sink.rows,
+        cubes: sink.cubes.unwrap_or_default(),
+        outcome,
+        events,
+        virtual_s: sim.now_s(),
+        wall_s: wall.elapsed().as_secs_f64(),
+    })
 }
 
 /// The one-line error of a run that stopped early, after its files are written.

@@ -1,6 +1,6 @@
 //! One function per CLI command: run the library, write the files, return the text to print.
 
-use specmux_core::calibration::Calibration;
+use specmux_core::calibration::{Calibration, CalibrationFrames};
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::{Grid, Library};
 use specmux_core::unmix::UnmixStats;
@@ -10,7 +10,9 @@ use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
 use specmux_twin::captures::CalibrationSource;
 use specmux_twin::experiment::Experiment;
+use specmux_twin::rig::Rig;
 use specmux_twin::run::{self, RunData, RunReport};
+use specmux_twin::scene::Materials;
 use std::path::Path;
 
 /// Append one formatted line to the command's output.
@@ -618,41 +620,32 @@ pub fn reconstruct(
     let Some(experiment) = experiment else {
         return Err(Error::config(&frame_name, "--experiment", "absent", "a frame is decoded with the rig that recorded it: pass --experiment EXP.toml (the experiment that made the frame) or a built-in scene name such as dead-leaves (the prototype rig)"));
     };
-    let mut exp = experiment_for(experiment, None)?;
+    let exp = experiment_for(experiment, None)?;
     let frame = specmux_io::frame::read(frame_path)?;
-    if specmux_io::frame::is_raw_dn(frame_path) && exp.rig.sensor.is_none() {
-        return Err(Error::config(&exp.file, "rig.sensor", "absent", &format!("{frame_name} is a 16-bit PNG of raw DN: the experiment needs its camera ([rig.sensor]) to turn DN into light")));
-    }
-    exp.scene.size = [frame.width, frame.height];
-    exp.validate()?;
+    let raw_dn = specmux_io::frame::is_raw_dn(frame_path)
+        .then(|| format!("{frame_name} is a 16-bit PNG of raw DN"));
+    let exp = frame_experiment(&exp, &frame, raw_dn.as_deref())?;
     let grid = exp.scene.grid(&exp.file)?;
     // Every input is read and checked before any work and any output.
     let truth = truth
         .map(|p| read_truth(p, &frame, grid.count).map(|c| (p, c)))
         .transpose()?;
-    let materials = specmux_twin::scene::Materials::load(lib)?;
-    let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
-    let cal = match calibration {
-        Some(dir) => {
-            let frames = specmux_io::frame::read_calibration(
-                dir,
-                rig.carriers.len(),
-                frame.width,
-                frame.height,
-            )?;
-            Calibration::from_frames(&rig.carriers, &frames, exp.calibration.search_bins)
-                .map_err(|e| e.within(&dir.display().to_string(), "--calibration", "its frames"))?
-        }
-        None => {
-            let (sim, _) = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?.run()?;
-            let mut cal = run::calibration(&exp, &rig, &sim)?;
-            cal.source = format!(
-                "the twin's simulated {} of the experiment's rig (no --calibration)",
-                cal.source
-            );
-            cal
-        }
-    };
+    let materials = Materials::load(lib)?;
+    let rig = Rig::build(&exp, lib, &materials)?;
+    let (w, h, n) = (frame.width, frame.height, rig.carriers.len());
+    let frames = calibration
+        .map(|dir| specmux_io::frame::read_calibration(dir, n, w, h))
+        .transpose()?;
+    let place = calibration.map(|dir| dir.display().to_string());
+    let measured = frames
+        .as_ref()
+        .zip(place.as_deref())
+        .map(|(frames, place)| Measured {
+            frames,
+            place,
+            key: "--calibration",
+        });
+    let cal = frame_calibration(&exp, &rig, &materials, measured)?;
     say!(text, "calibration: {}", cal.source);
     let recon = Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)?;
     let (cube, stats, times) = reconstruct_on_device(&exp, &recon, &frame)?;
@@ -697,6 +690,55 @@ pub fn reconstruct(
     crate::panel::write_figures(&exp, lib, truth.as_ref().map(|t| &t.1), &cube, &files)?;
     finish(files, out, &mut text)?;
     Ok(text)
+}
+
+/// The experiment a frame is decoded with: the rig of `exp` at the frame's size. `raw_dn` says
+/// what makes the frame raw DN (a 16-bit PNG or TIFF, an integer array): such a frame needs the
+/// experiment's camera (`[rig.sensor]`) to turn DN into light.
+pub fn frame_experiment(
+    exp: &Experiment,
+    frame: &Cube,
+    raw_dn: Option<&str>,
+) -> Result<Experiment> {
+    if let (Some(what), None) = (raw_dn, &exp.rig.sensor) {
+        let why =
+            format!("{what}: the experiment needs its camera ([rig.sensor]) to turn DN into light");
+        return Err(Error::config(&exp.file, "rig.sensor", "absent", &why));
+    }
+    let mut exp = exp.clone();
+    exp.scene.size = [frame.width, frame.height];
+    exp.validate()?;
+    Ok(exp)
+}
+
+/// Calibration frames a user measured, with where they came from (`place`: a folder) and the
+/// option or key that gave them, for error messages.
+pub struct Measured<'a> {
+    pub frames: &'a CalibrationFrames,
+    pub place: &'a str,
+    pub key: &'a str,
+}
+
+/// The calibration a frame is reconstructed with: the core's `Calibration::from_frames` on the
+/// `measured` frames, or without them the twin's simulated captures of the experiment's rig,
+/// its source saying so.
+pub fn frame_calibration(
+    exp: &Experiment,
+    rig: &Rig,
+    materials: &Materials,
+    measured: Option<Measured>,
+) -> Result<Calibration> {
+    if let Some(m) = measured {
+        return Calibration::from_frames(&rig.carriers, m.frames, exp.calibration.search_bins)
+            .map_err(|e| e.within(m.place, m.key, "its frames"));
+    }
+    let (sim, _) = specmux_twin::forward::Pipeline::build(exp, rig, materials)?.run()?;
+    let mut cal = run::calibration(exp, rig, &sim)?;
+    cal.source = format!(
+        "the twin's simulated {} of the experiment's rig (no --calibration)",
+        cal.source
+    );
+    Ok(cal)
 }
 
 /// A truth cube that matches the frame's size and the experiment's band count.

@@ -1,0 +1,107 @@
+//! `specmux.Experiment`: the experiment file of the CLI (scene, rig, calibration,
+//! reconstruction) from a file, TOML text, a dict or the built-in prototype.
+
+use crate::error::err;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use specmux_twin::Experiment;
+use std::path::PathBuf;
+
+/// An experiment: scene, rig, calibration and reconstruction settings (the TOML file of
+/// `specmux simulate`/`demo`).
+#[pyclass(name = "Experiment", module = "specmux")]
+pub struct PyExperiment {
+    pub inner: Experiment,
+}
+
+#[pymethods]
+impl PyExperiment {
+    /// Read an experiment file (TOML).
+    #[staticmethod]
+    fn from_file(path: PathBuf) -> PyResult<Self> {
+        Ok(PyExperiment {
+            inner: Experiment::load(&path).map_err(err)?,
+        })
+    }
+
+    /// Parse an experiment from TOML text; `file` names it in error messages.
+    #[staticmethod]
+    #[pyo3(signature = (text, file = "<string>"))]
+    fn from_toml(text: &str, file: &str) -> PyResult<Self> {
+        Ok(PyExperiment {
+            inner: Experiment::from_toml(text, file).map_err(err)?,
+        })
+    }
+
+    /// An experiment from a dict with the TOML file's structure
+    /// (`{"scene": {"size": [64, 64]}, "rig": {...}}`); absent keys take their defaults.
+    #[staticmethod]
+    #[pyo3(signature = (d, file = "<dict>"))]
+    fn from_dict(py: Python<'_>, d: &Bound<'_, PyDict>, file: &str) -> PyResult<Self> {
+        let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
+        let mut e: Experiment =
+            serde_json::from_str(&text).map_err(|x| err(format!("{file}: {x}")))?;
+        e.file = file.to_string();
+        e.validate().map_err(err)?;
+        Ok(PyExperiment { inner: e })
+    }
+
+    /// The built-in prototype (six-segment wheel, dead-leaves scene), optionally on another
+    /// scene source (a built-in name such as "shaded-objects") or size (width = height = size).
+    #[staticmethod]
+    #[pyo3(signature = (scene = None, size = None))]
+    fn prototype(scene: Option<String>, size: Option<usize>) -> PyResult<Self> {
+        let mut e = Experiment::prototype();
+        if let Some(s) = scene {
+            e.scene.source = s;
+        }
+        if let Some(n) = size {
+            e.scene.size = [n, n];
+        }
+        e.validate().map_err(err)?;
+        Ok(PyExperiment { inner: e })
+    }
+
+    /// The scene size (width, height) in pixels; settable (validated).
+    #[getter]
+    fn size(&self) -> (usize, usize) {
+        (self.inner.scene.size[0], self.inner.scene.size[1])
+    }
+
+    #[setter]
+    fn set_size(&mut self, size: (usize, usize)) -> PyResult<()> {
+        let mut e = self.inner.clone();
+        e.scene.size = [size.0, size.1];
+        e.validate().map_err(err)?;
+        self.inner = e;
+        Ok(())
+    }
+
+    /// The file it came from (or "<built-in prototype>", "<string>", "<dict>").
+    #[getter]
+    fn file(&self) -> String {
+        self.inner.file.clone()
+    }
+
+    /// The scene source: a built-in scene name or `exr:`/`mitsuba:` file.
+    #[getter]
+    fn scene(&self) -> String {
+        self.inner.scene.source.clone()
+    }
+
+    /// The whole experiment as a dict (every key, defaults filled in).
+    fn to_dict(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        let text = serde_json::to_string(&self.inner).map_err(err)?;
+        Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Experiment(file={:?}, scene={:?}, size={}x{})",
+            self.inner.file,
+            self.inner.scene.source,
+            self.inner.scene.size[0],
+            self.inner.scene.size[1]
+        )
+    }
+}
