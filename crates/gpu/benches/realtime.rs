@@ -5,7 +5,8 @@
 //! REPEATS runs after WARMUP (GAP_REPEATS for the CPU's GAP rows, seconds each), the GPU ones
 //! from submission to the finished work (and the host copy where one is named).
 //!
-//! `cargo bench -p specmux-gpu --bench realtime` (SPECMUX_BENCH_REPEATS overrides REPEATS).
+//! `cargo bench -p specmux-gpu --bench realtime` (SPECMUX_BENCH_REPEATS overrides REPEATS;
+//! SPECMUX_BENCH_SIZE the frames' side, e.g. 64 for a quick run that checks the bench works).
 
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
@@ -349,9 +350,13 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(REPEATS);
+    let size: usize = std::env::var("SPECMUX_BENCH_SIZE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(768);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
-        "adapter: {}; CPU threads: {threads}; median of {repeats} runs, ms\n",
+        "adapter: {}; CPU threads: {threads}; frames of {size} × {size}; median of {repeats} runs, ms\n",
         ctx.adapter_name()
     );
     if ctx.is_software() {
@@ -364,11 +369,12 @@ fn main() {
         "GPU",
         fft_alone(&ctx, repeats),
     );
-    let shaded = "[scene]\nsource = \"shaded-objects\"\nseed = 11\n";
-    bench_scene(&ctx, "dead-leaves", "", repeats);
-    bench_scene(&ctx, "shaded-objects", shaded, repeats);
+    let dead = format!("[scene]\nsize = [{size}, {size}]\n");
+    let shaded = format!("{dead}source = \"shaded-objects\"\nseed = 11\n");
+    bench_scene(&ctx, "dead-leaves", &dead, repeats);
+    bench_scene(&ctx, "shaded-objects", &shaded, repeats);
     for method in ["gap", "gap-tv"] {
-        bench_gap(&ctx, "dead-leaves", "", method, repeats);
-        bench_gap(&ctx, "shaded-objects", shaded, method, repeats);
+        bench_gap(&ctx, "dead-leaves", &dead, method, repeats);
+        bench_gap(&ctx, "shaded-objects", &shaded, method, repeats);
     }
 }
