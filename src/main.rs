@@ -2,6 +2,7 @@
 
 use clap::{Parser, Subcommand};
 use specmux_controller::commands as controller;
+use specmux_core::reconstructor::ComputeDevice;
 use specmux_core::spectral::Library;
 use specmux_core::Result;
 use specmux_report::commands;
@@ -68,6 +69,11 @@ enum Command {
         /// Override the frame size (square).
         #[arg(long)]
         size: Option<usize>,
+        /// Where to reconstruct: cpu, gpu (needs the gpu feature and an adapter) or auto; the
+        /// default is the experiment's [compute] device. Settings without a GPU kernel (joint)
+        /// stay on the CPU; the table and plot say where each ran.
+        #[arg(long, value_parser = ["cpu", "gpu", "auto"])]
+        device: Option<String>,
     },
     /// The paper's crop-size figure: mean channel PSNR/RMSE/SSIM of the demultiplexed channels
     /// for crops 0.05–0.4 with the carrier layout held fixed (windows above 0.25 overlap).
@@ -175,6 +181,15 @@ enum Command {
 }
 
 /// Print a command's text to stdout; a closed pipe (`specmux demo | head`) ends quietly.
+/// `--device` (clap has checked it is one of cpu, gpu, auto).
+fn device_of(name: String) -> ComputeDevice {
+    match name.as_str() {
+        "gpu" => ComputeDevice::Gpu,
+        "auto" => ComputeDevice::Auto,
+        _ => ComputeDevice::Cpu,
+    }
+}
+
 fn emit(text: &str) {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
@@ -242,7 +257,8 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
             repeats,
             size,
-        } => commands::bench(&experiment, &out, repeats, size, lib),
+            device,
+        } => commands::bench(&experiment, &out, repeats, size, device.map(device_of), lib),
         Command::SweepCrop {
             experiments,
             out,

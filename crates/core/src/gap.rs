@@ -170,6 +170,22 @@ pub struct Gap {
     beta: Vec<f32>,
 }
 
+/// What one run of a `Gap` reads, for a mirror of it on another device (specmux-gpu).
+pub struct GapTables<'a> {
+    pub w: usize,
+    pub h: usize,
+    /// Channels J.
+    pub planes: usize,
+    pub config: &'a GapConfig,
+    /// The J pattern planes S.
+    pub patterns: &'a [f32],
+    /// 1 / max(Σ_k s_k², floor) per pixel.
+    pub inv_energy: &'a [f32],
+    /// Group weight β per coefficient position; 0 in the scaling band.
+    pub beta: &'a [f32],
+    pub dwt: &'a Dwt2,
+}
+
 /// The iterate and the buffers one run reuses (no allocation per iteration).
 pub struct GapState {
     /// The current estimate V (after the denoising step).
@@ -243,6 +259,28 @@ impl Gap {
             dwt,
             beta,
         })
+    }
+
+    /// The solver's tables, as its steps read them.
+    pub fn tables(&self) -> GapTables<'_> {
+        GapTables {
+            w: self.w,
+            h: self.h,
+            planes: self.j,
+            config: &self.cfg,
+            patterns: &self.patterns,
+            inv_energy: &self.inv_energy,
+            beta: &self.beta,
+            dwt: &self.dwt,
+        }
+    }
+
+    /// Index, in ascending order of the detail groups' scores ‖W_G‖/β_G, of the score that is
+    /// the shrinkage threshold λ; None when every detail group is kept (λ = 0).
+    pub fn threshold_rank(&self) -> Option<usize> {
+        let detail = self.beta.iter().filter(|&&b| b != 0.0).count();
+        let kept = ((self.cfg.keep * detail as f64).ceil() as usize).min(detail);
+        (kept < detail).then(|| detail - kept - 1)
     }
 
     /// The state seeded by `seed` (J planes) for measurement `frame` (one plane).
@@ -369,15 +407,13 @@ impl Gap {
                     };
                 }
             });
-        let scaling = self.beta.iter().filter(|&&b| b == 0.0).count();
-        let detail = n - scaling;
-        let kept = ((self.cfg.keep * detail as f64).ceil() as usize).min(detail);
-        let lambda = if kept == detail {
-            0.0
-        } else {
-            st.select.copy_from_slice(&st.t);
-            let idx = n - scaling - kept - 1;
-            *st.select.select_nth_unstable_by(idx, f32::total_cmp).1
+        // The scaling band scores +∞: it sorts above every detail group.
+        let lambda = match self.threshold_rank() {
+            None => 0.0,
+            Some(idx) => {
+                st.select.copy_from_slice(&st.t);
+                *st.select.select_nth_unstable_by(idx, f32::total_cmp).1
+            }
         };
         st.t.par_iter_mut().for_each(|s| {
             *s = if *s > lambda { 1.0 - lambda / *s } else { 0.0 };

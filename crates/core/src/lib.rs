@@ -12,6 +12,7 @@ pub mod cube;
 pub mod demux;
 pub mod error;
 pub mod fft;
+pub mod fft_backend;
 pub mod gap;
 pub mod interrupt;
 pub mod joint;

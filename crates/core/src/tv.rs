@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 /// Chambolle's step; 1/4 is the step the method is used with in practice (1/8 is the proven bound).
-const TAU: f32 = 0.25;
+pub const TAU: f32 = 0.25;
 
 /// The dual field p = (px, py) of one `w × h × planes` cube, kept between calls (warm start).
 pub struct TvDenoiser {

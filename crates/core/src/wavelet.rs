@@ -80,6 +80,11 @@ impl Dwt2 {
         })
     }
 
+    /// The low-pass and high-pass analysis filters (h, g) in f32, as the transform applies them.
+    pub fn filters(&self) -> (&[f32], &[f32]) {
+        (&self.lo, &self.hi)
+    }
+
     /// Detail level of each coefficient position: 1 = finest … `levels` = coarsest, 0 = the
     /// coarse scaling (approximation) band.
     pub fn level_map(&self) -> Vec<u8> {

@@ -1,11 +1,14 @@
 //! Medians of the real-time path on the CPU and on the GPU, 768 × 768, the prototype on
 //! dead-leaves and on shaded objects: the GPU FFT alone, demultiplexing, unmixing, and the
-//! whole frame with and without reading the 31-band cube back (docs/gpu.md). Each figure is
-//! the median wall time of REPEATS runs after WARMUP, the GPU ones from submission to the
-//! finished work (and the host copy where one is named).
+//! whole frame with and without reading the 31-band cube back; then the whole chain with 50
+//! iterations of GAP and of GAP-TV (docs/gpu.md). Each figure is the median wall time of
+//! REPEATS runs after WARMUP (GAP_REPEATS for the CPU's GAP rows, seconds each), the GPU ones
+//! from submission to the finished work (and the host copy where one is named).
 //!
-//! `cargo bench -p specmux-gpu --bench realtime` (SPECMUX_BENCH_REPEATS overrides REPEATS).
+//! `cargo bench -p specmux-gpu --bench realtime` (SPECMUX_BENCH_REPEATS overrides REPEATS;
+//! SPECMUX_BENCH_SIZE the frames' side, e.g. 64 for a quick run that checks the bench works).
 
+use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_gpu::demux::STAGES;
@@ -20,10 +23,19 @@ use std::time::Instant;
 
 const WARMUP: usize = 5;
 const REPEATS: usize = 50;
+/// Repeats of the CPU's GAP rows (several seconds each on the project's machine).
+const GAP_REPEATS: usize = 3;
+/// The real-time path: no de-aliasing.
+const FOURIER: &str = "[reconstruct.gap]\nmethod = \"fourier\"\n";
 
 /// Median seconds of `f` over the repeats.
-fn median(repeats: usize, mut f: impl FnMut()) -> f64 {
-    for _ in 0..WARMUP {
+fn median(repeats: usize, f: impl FnMut()) -> f64 {
+    median_after(WARMUP, repeats, f)
+}
+
+/// Median seconds of `f` over `repeats` runs after `warmup`.
+fn median_after(warmup: usize, repeats: usize, mut f: impl FnMut()) -> f64 {
+    for _ in 0..warmup {
         f();
     }
     let mut t: Vec<f64> = (0..repeats)
@@ -151,7 +163,8 @@ fn kernel_times(
     )
 }
 
-fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
+/// The simulated frame of an experiment and its reconstructor.
+fn simulate(name: &str, toml: &str) -> (Cube, Reconstructor) {
     let lib = Library::default_root();
     let materials = Materials::load(&lib).expect("spectra/ is readable");
     let exp = Experiment::from_toml(toml, name).expect("a valid experiment");
@@ -160,8 +173,95 @@ fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
         .unwrap()
         .run()
         .unwrap();
-    let frame = sim.frame.clone();
     let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+    (sim.frame, recon)
+}
+
+/// The whole chain with 50 iterations of `method` (gap or gap-tv), CPU against GPU.
+fn bench_gap(ctx: &GpuContext, name: &str, toml: &str, method: &str, repeats: usize) {
+    let what = format!("{method} 50 it");
+    let toml = format!("{toml}[reconstruct.gap]\nmethod = \"{method}\"\niterations = 50\n");
+    let (frame, recon) = simulate(name, &toml);
+    row(
+        name,
+        &format!("{what}: demultiplex + de-alias + unmix"),
+        "CPU",
+        median_after(1, GAP_REPEATS, || drop(recon.run(&frame, None).unwrap())),
+    );
+    let g = GpuReconstructor::new(ctx, &recon).unwrap();
+    let mut gcube: Cube = g.output_cube();
+    row(
+        name,
+        &format!("{what}: demultiplex + de-alias + unmix, cube stays on GPU"),
+        "GPU",
+        median(repeats, || drop(g.run_resident(ctx, &frame).unwrap())),
+    );
+    row(
+        name,
+        &format!("{what}: demultiplex + de-alias + unmix, cube read back"),
+        "GPU",
+        median(repeats, || {
+            drop(g.run_into(ctx, &frame, &mut gcube).unwrap())
+        }),
+    );
+    if let Some(t) = gap_kernels(ctx, &g, &frame, repeats) {
+        row(
+            name,
+            &format!("{what}: de-alias kernels"),
+            "GPU timestamps",
+            t,
+        );
+    }
+}
+
+/// GPU time of the de-aliasing alone, from timestamps around it (None without timestamps).
+fn gap_kernels(
+    ctx: &GpuContext,
+    g: &GpuReconstructor,
+    frame: &Cube,
+    repeats: usize,
+) -> Option<f64> {
+    let gap = g.gap.as_ref()?;
+    let need = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+    if !ctx.device.features().contains(need) {
+        return None;
+    }
+    let set = ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+        label: None,
+        ty: wgpu::QueryType::Timestamp,
+        count: 2,
+    });
+    let resolve = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: 16,
+        usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let staging = ctx.readback("timestamps", 16);
+    let period = ctx.queue.get_timestamp_period() as f64 * 1e-9;
+    let t: Vec<f64> = (0..WARMUP + repeats)
+        .map(|_| {
+            g.demux.upload(ctx, frame).unwrap();
+            let mut enc = ctx.device.create_command_encoder(&Default::default());
+            g.demux.encode(&mut enc);
+            enc.write_timestamp(&set, 0);
+            gap.encode(&mut enc);
+            enc.write_timestamp(&set, 1);
+            enc.resolve_query_set(&set, 0..2, &resolve, 0);
+            enc.copy_buffer_to_buffer(&resolve, 0, &staging, 0, 16);
+            ctx.queue.submit([enc.finish()]);
+            let mut ts = [0u64; 2];
+            ctx.read_into(&staging, &mut ts).unwrap();
+            ts[1].wrapping_sub(ts[0]) as f64 * period
+        })
+        .collect();
+    let mut t = t[WARMUP..].to_vec();
+    t.sort_by(f64::total_cmp);
+    Some(t[t.len() / 2])
+}
+
+fn bench_scene(ctx: &GpuContext, name: &str, toml: &str, repeats: usize) {
+    let (frame, recon) = simulate(name, &format!("{toml}{FOURIER}"));
     let xhat = recon.demultiplex(&frame).unwrap();
     let mut cube = recon.unmix(&xhat).unwrap().0;
     let stats = recon.unmixer.unmix_into(&xhat, &mut cube).unwrap();
@@ -250,9 +350,13 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(REPEATS);
+    let size: usize = std::env::var("SPECMUX_BENCH_SIZE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(768);
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!(
-        "adapter: {}; CPU threads: {threads}; median of {repeats} runs, ms\n",
+        "adapter: {}; CPU threads: {threads}; frames of {size} × {size}; median of {repeats} runs, ms\n",
         ctx.adapter_name()
     );
     if ctx.is_software() {
@@ -265,11 +369,12 @@ fn main() {
         "GPU",
         fft_alone(&ctx, repeats),
     );
-    bench_scene(&ctx, "dead-leaves", "", repeats);
-    bench_scene(
-        &ctx,
-        "shaded-objects",
-        "[scene]\nsource = \"shaded-objects\"\nseed = 11\n",
-        repeats,
-    );
+    let dead = format!("[scene]\nsize = [{size}, {size}]\n");
+    let shaded = format!("{dead}source = \"shaded-objects\"\nseed = 11\n");
+    bench_scene(&ctx, "dead-leaves", &dead, repeats);
+    bench_scene(&ctx, "shaded-objects", &shaded, repeats);
+    for method in ["gap", "gap-tv"] {
+        bench_gap(&ctx, "dead-leaves", &dead, method, repeats);
+        bench_gap(&ctx, "shaded-objects", &shaded, method, repeats);
+    }
 }

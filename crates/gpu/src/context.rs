@@ -5,7 +5,8 @@
 use crate::error::{GpuError, Result};
 use wgpu::util::DeviceExt;
 
-/// An open GPU: adapter description, device and queue.
+/// An open GPU: adapter description, device and queue (a clone is another handle to them).
+#[derive(Clone)]
 pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
@@ -50,6 +51,11 @@ impl GpuContext {
             "{} ({:?}, {:?})",
             self.info.name, self.info.backend, self.info.device_type
         )
+    }
+
+    /// The adapter's own name, e.g. "NVIDIA H100 80GB HBM3" or "llvmpipe (LLVM 15.0.6, 256 bits)".
+    pub fn name(&self) -> &str {
+        &self.info.name
     }
 
     /// True for a software rasteriser (lavapipe, WARP): timings from it say nothing of a GPU.
@@ -184,11 +190,21 @@ impl GpuContext {
         pipeline: &wgpu::ComputePipeline,
         buffers: &[&wgpu::Buffer],
     ) -> wgpu::BindGroup {
+        let at: Vec<(u32, &wgpu::Buffer)> = (0..).zip(buffers.iter().copied()).collect();
+        self.bind_at(pipeline, &at)
+    }
+
+    /// A bind group of `pipeline`'s group 0 with each buffer at its binding (an entry point
+    /// that uses only some of its module's bindings gets only those).
+    pub fn bind_at(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        buffers: &[(u32, &wgpu::Buffer)],
+    ) -> wgpu::BindGroup {
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry {
-                binding: i as u32,
+            .map(|&(binding, b)| wgpu::BindGroupEntry {
+                binding,
                 resource: b.as_entire_binding(),
             })
             .collect();
@@ -203,4 +219,56 @@ impl GpuContext {
 /// Workgroups of `size` invocations needed to cover `n` items.
 pub fn groups(n: usize, size: u32) -> u32 {
     n.div_ceil(size as usize) as u32
+}
+
+/// Workgroups of `size` covering `n` items in a 1-D kernel, folded into (x, y) so that no side
+/// exceeds the 65535 a dispatch allows (the kernel reads item gid.x + gid.y·nwg.x·size).
+pub fn linear_groups(n: usize, size: u32) -> [u32; 3] {
+    let g = groups(n, size);
+    [g.min(65535), g.div_ceil(65535), 1]
+}
+
+/// One kernel launch, recorded once at plan time: pipeline, bindings, workgroups.
+pub struct Launch {
+    pipeline: wgpu::ComputePipeline,
+    bind: wgpu::BindGroup,
+    groups: [u32; 3],
+}
+
+impl Launch {
+    /// `entry` of `module` with `buffers` bound at 0, 1, 2, … and `groups` workgroups.
+    pub fn new(
+        ctx: &GpuContext,
+        module: &wgpu::ShaderModule,
+        entry: &str,
+        buffers: &[&wgpu::Buffer],
+        groups: [u32; 3],
+    ) -> Launch {
+        let at: Vec<(u32, &wgpu::Buffer)> = (0..).zip(buffers.iter().copied()).collect();
+        Launch::bound(ctx, module, entry, &at, groups)
+    }
+
+    /// `entry` of `module` with each buffer at its own binding.
+    pub fn bound(
+        ctx: &GpuContext,
+        module: &wgpu::ShaderModule,
+        entry: &str,
+        buffers: &[(u32, &wgpu::Buffer)],
+        groups: [u32; 3],
+    ) -> Launch {
+        let pipeline = ctx.pipeline(module, entry);
+        let bind = ctx.bind_at(&pipeline, buffers);
+        Launch {
+            pipeline,
+            bind,
+            groups,
+        }
+    }
+
+    /// Record the dispatch into a compute pass.
+    pub fn record(&self, cp: &mut wgpu::ComputePass) {
+        cp.set_pipeline(&self.pipeline);
+        cp.set_bind_group(0, &self.bind, &[]);
+        cp.dispatch_workgroups(self.groups[0], self.groups[1], self.groups[2]);
+    }
 }

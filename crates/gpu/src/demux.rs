@@ -4,7 +4,7 @@
 //! offset ramp and the crosstalk mix. Every buffer is made once; a frame is one upload, one
 //! command buffer and (only if asked) one read-back.
 
-use crate::context::{groups, GpuContext};
+use crate::context::{groups, linear_groups, GpuContext, Launch};
 use crate::error::{GpuError, Result};
 use crate::fft::{Direction, GpuFft2};
 use specmux_core::demux::Demux;
@@ -35,21 +35,6 @@ struct CarrierParams {
     cx: i32,
     cy: i32,
     inv_gain: [f32; 2],
-}
-
-/// One kernel launch: pipeline, bindings, workgroups.
-struct Launch {
-    pipeline: wgpu::ComputePipeline,
-    bind: wgpu::BindGroup,
-    groups: [u32; 3],
-}
-
-impl Launch {
-    fn record(&self, cp: &mut wgpu::ComputePass) {
-        cp.set_pipeline(&self.pipeline);
-        cp.set_bind_group(0, &self.bind, &[]);
-        cp.dispatch_workgroups(self.groups[0], self.groups[1], self.groups[2]);
-    }
 }
 
 /// The GPU demultiplexer of one rig: its buffers hold the last frame and its x̂ planes.
@@ -99,43 +84,36 @@ impl GpuDemux {
         let inverse = GpuFft2::new(ctx, &z, w, h, k)?;
         let module = ctx.module("demux", include_str!("shaders/demux.wgsl"));
         let uniform = ctx.uniform("demux params", &params);
-        let to_complex = {
-            let pipeline = ctx.pipeline(&module, "to_complex");
-            let bind = ctx.bind(&pipeline, &[&frame, &spectrum, &uniform]);
-            let g = groups(w * h, 256);
-            Launch {
-                pipeline,
-                bind,
-                groups: [g.min(65535), g.div_ceil(65535), 1],
-            }
-        };
-        let crop = {
-            let pipeline = ctx.pipeline(&module, "crop");
-            let carriers = ctx.storage_init("carriers", &carrier_params(demux));
-            let ones = vec![1.0f32; wx * wy];
-            let weights = ctx.storage_init("window", demux.taper().unwrap_or(&ones));
-            let bind = ctx.bind(&pipeline, &[&spectrum, &z, &carriers, &weights, &uniform]);
-            Launch {
-                pipeline,
-                bind,
-                groups: [groups(w, 16), groups(h, 16), k as u32],
-            }
-        };
-        let demod = {
-            let pipeline = ctx.pipeline(&module, "demod");
-            let (ex, ey) = ramps(demux, w, h);
-            let (ex, ey) = (
-                ctx.storage_init("ramp x", &ex),
-                ctx.storage_init("ramp y", &ey),
-            );
-            let m = ctx.storage_init("mix", &mix_matrix(mix, k)?);
-            let bind = ctx.bind(&pipeline, &[&z, &out, &ex, &ey, &m, &uniform]);
-            Launch {
-                pipeline,
-                bind,
-                groups: [groups(w, 16), groups(h, 16), 1],
-            }
-        };
+        let to_complex = Launch::new(
+            ctx,
+            &module,
+            "to_complex",
+            &[&frame, &spectrum, &uniform],
+            linear_groups(w * h, 256),
+        );
+        let carriers = ctx.storage_init("carriers", &carrier_params(demux));
+        let ones = vec![1.0f32; wx * wy];
+        let weights = ctx.storage_init("window", demux.taper().unwrap_or(&ones));
+        let crop = Launch::new(
+            ctx,
+            &module,
+            "crop",
+            &[&spectrum, &z, &carriers, &weights, &uniform],
+            [groups(w, 16), groups(h, 16), k as u32],
+        );
+        let (ex, ey) = ramps(demux, w, h);
+        let (ex, ey) = (
+            ctx.storage_init("ramp x", &ex),
+            ctx.storage_init("ramp y", &ey),
+        );
+        let m = ctx.storage_init("mix", &mix_matrix(mix, k)?);
+        let demod = Launch::new(
+            ctx,
+            &module,
+            "demod",
+            &[&z, &out, &ex, &ey, &m, &uniform],
+            [groups(w, 16), groups(h, 16), 1],
+        );
         let staging = ctx.readback("xhat staging", npx * 4 * k as u64);
         Ok(GpuDemux {
             w,
@@ -202,6 +180,11 @@ impl GpuDemux {
     /// The spectrum (w × h complex) and windows (planes × w × h complex) buffers.
     pub fn intermediates(&self) -> (&wgpu::Buffer, &wgpu::Buffer) {
         (&self.spectrum, &self.z)
+    }
+
+    /// The frame (w × h f32) the last `upload` wrote.
+    pub fn frame(&self) -> &wgpu::Buffer {
+        &self.frame
     }
 
     /// The x̂ planes (planes × w × h f32) the last `encode` wrote; they stay on the GPU.

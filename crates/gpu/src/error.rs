@@ -24,3 +24,14 @@ pub enum GpuError {
 }
 
 pub type Result<T> = std::result::Result<T, GpuError>;
+
+impl From<GpuError> for specmux_core::Error {
+    /// A GPU failure in a core call: the core's own error, a shape, or one numerical line.
+    fn from(e: GpuError) -> Self {
+        match e {
+            GpuError::Core(c) => c,
+            GpuError::Shape(s) => specmux_core::Error::Shape(s),
+            other => specmux_core::Error::Numerical(other.to_string()),
+        }
+    }
+}

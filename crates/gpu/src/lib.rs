@@ -1,17 +1,25 @@
-//! specmux-gpu: the reconstruction core's real-time path on a GPU through wgpu — a batched
-//! 2-D FFT in WGSL, Fourier demultiplexing and the exact per-pixel non-negative unmixing —
-//! giving the CPU's answers within stated f32 tolerances (docs/gpu.md). Data stays on the GPU
-//! from the uploaded frame to the cube; buffers are made once per rig and reused per frame.
+//! specmux-gpu: the reconstruction core on a GPU through wgpu — a batched 2-D FFT in WGSL,
+//! Fourier demultiplexing, GAP and GAP-TV de-aliasing (wavelet group shrinkage with an exact
+//! GPU selection of its threshold, TV denoising) and the exact per-pixel non-negative
+//! unmixing — giving the CPU's answers within stated f32 tolerances (docs/gpu.md). Data stays
+//! on the GPU from the uploaded frame to the cube; buffers are made once per rig and reused
+//! per frame.
 
 pub mod backend;
 pub mod context;
 pub mod demux;
 pub mod error;
 pub mod fft;
+pub mod fft_backend;
+pub mod gap;
+pub mod mix;
 pub mod reconstructor;
+pub mod select;
+pub mod tv;
 pub mod unmix;
+pub mod wavelet;
 
 pub use context::GpuContext;
 pub use error::{GpuError, Result};
-pub use reconstructor::GpuReconstructor;
+pub use reconstructor::{GpuReconstructor, GpuRun};
 pub use wgpu;

@@ -131,3 +131,43 @@ fn a_length_with_a_factor_of_seven_is_refused() {
         Ok(_) => panic!("a 14-point FFT was planned"),
     }
 }
+
+/// The GPU FFT through the core's `FftBackend` trait against the CPU's `Fft2` through the
+/// same calls: forward half spectra, the full inverse, a cropped inverse (the first columns
+/// only, as a demultiplexer keeps) and the size errors. Same bound as above.
+#[test]
+fn the_gpu_backend_gives_the_cpu_backends_answers() {
+    use specmux_core::fft_backend::FftBackend;
+    use specmux_gpu::fft_backend::GpuFftBackend;
+    let Some(ctx) = common::context() else { return };
+    for (w, h) in [(48, 30), (20, 45), (15, 12)] {
+        let (cpu, gpu) = (Fft2::new(w, h), GpuFftBackend::new(&ctx, w, h).unwrap());
+        let backends: [&dyn FftBackend; 2] = [&cpu, &gpu];
+        let x = common::noise(w * h, 9);
+        let [sc, sg] = backends.map(|b| b.forward(&x).unwrap());
+        let flat = |s: &[specmux_core::Complex32]| -> Vec<f32> {
+            s.iter().flat_map(|c| [c.re, c.im]).collect()
+        };
+        let want: Vec<f64> = flat(&sc.data).iter().map(|&v| v as f64).collect();
+        let e = common::rel_l2(&flat(&sg.data), &want);
+        eprintln!("{w}×{h} forward through the trait: {e:.2e}");
+        assert!(e < TOL, "{w}×{h} forward: {e:.2e}");
+        // A spectrum that is not Hermitian in its DC column (as a crop leaves it) and cut
+        // after 3 columns: both sides take the same real part.
+        let mut cols = sc.data[..3 * h].to_vec();
+        cols[1].im += 0.7;
+        for c in [&sc.data[..], &cols[..]] {
+            let [rc, rg] = backends.map(|b| b.inverse(c).unwrap());
+            let want: Vec<f64> = rc.iter().map(|&v| v as f64).collect();
+            let e = common::rel_l2(&rg, &want);
+            eprintln!("{w}×{h} inverse of {} columns: {e:.2e}", c.len() / h);
+            assert!(
+                e < TOL,
+                "{w}×{h} inverse of {} columns: {e:.2e}",
+                c.len() / h
+            );
+        }
+        assert!(gpu.forward(&x[1..]).is_err() && gpu.inverse(&sc.data[1..]).is_err());
+        assert!(gpu.device().starts_with("GPU "));
+    }
+}

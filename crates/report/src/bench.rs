@@ -16,7 +16,7 @@ use specmux_core::error::Result;
 use specmux_core::gap::GapConfig;
 use specmux_core::gap::Method;
 use specmux_core::metrics;
-use specmux_core::reconstructor::Reconstructor;
+use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_twin::experiment::Experiment;
@@ -134,11 +134,156 @@ pub fn default_grid() -> Vec<Setting> {
     g
 }
 
+/// Where the work–precision runs go (`specmux bench --device`, `[compute] device`): the CPU,
+/// or a GPU opened once. Settings without a GPU kernel (the joint method) run on the CPU, and
+/// their rows say so.
+pub struct Device {
+    #[cfg(feature = "gpu")]
+    pub gpu: Option<specmux_gpu::GpuContext>,
+}
+
+impl Device {
+    pub fn cpu() -> Device {
+        Device {
+            #[cfg(feature = "gpu")]
+            gpu: None,
+        }
+    }
+
+    /// Open what `device` names: `gpu` is an error without an adapter or without the `gpu`
+    /// feature; `auto` stays on the CPU there and says so in one line. `file` names the
+    /// experiment (or the command line) for the error.
+    pub fn open(device: ComputeDevice, file: &str) -> Result<Device> {
+        #[cfg(feature = "gpu")]
+        {
+            let _ = file;
+            let gpu =
+                specmux_gpu::backend::open(device).map_err(|e| Error::Numerical(e.to_string()))?;
+            Ok(Device { gpu })
+        }
+        #[cfg(not(feature = "gpu"))]
+        match device {
+            ComputeDevice::Cpu => Ok(Device::cpu()),
+            ComputeDevice::Gpu => Err(Error::config(
+                file,
+                "compute.device",
+                "gpu",
+                "this specmux was built without the GPU backend: cargo build --release --features gpu",
+            )),
+            ComputeDevice::Auto => {
+                eprintln!(
+                    "compute device auto: built without the gpu feature; reconstructing on the CPU"
+                );
+                Ok(Device::cpu())
+            }
+        }
+    }
+
+    /// "CPU, N threads", or "GPU NAME (backend, type)" flagged when the adapter is software.
+    pub fn describe(&self) -> String {
+        #[cfg(feature = "gpu")]
+        if let Some(ctx) = &self.gpu {
+            let software = if ctx.is_software() {
+                " — a software adapter: its times are a CPU emulating a GPU, not a GPU's"
+            } else {
+                ""
+            };
+            return format!("GPU {}{software}", ctx.adapter_name());
+        }
+        format!("CPU, {} threads", rayon::current_num_threads())
+    }
+
+    /// `describe` short enough for a plot's title: the adapter's name up to its first
+    /// parenthesis, and "software" for a software adapter.
+    pub fn short(&self) -> String {
+        #[cfg(feature = "gpu")]
+        if let Some(ctx) = &self.gpu {
+            let name = ctx.name().split(" (").next().unwrap_or("");
+            return match ctx.is_software() {
+                true => format!("GPU {name} (software: not a GPU's speed)"),
+                false => format!("GPU {name}"),
+            };
+        }
+        self.describe()
+    }
+}
+
+/// One setting's reconstruction on the device it runs on.
+enum Runner {
+    Cpu(Box<Reconstructor>),
+    /// The GPU (a handle to the one `Device` opened), its chain and the cube it reads back
+    /// into, kept across repeats.
+    #[cfg(feature = "gpu")]
+    Gpu(
+        specmux_gpu::GpuContext,
+        Box<specmux_gpu::GpuReconstructor>,
+        Cube,
+    ),
+}
+
+/// What one timed run gives: total seconds, seconds of each stage (NaN where the device does
+/// not time them apart: the GPU runs them in one submission), and (x after de-aliasing, cube).
+type Timed = (f64, [f64; 3], Option<(Cube, Cube)>);
+
+impl Runner {
+    /// The GPU runner where `device` has a GPU and the setting a GPU kernel, else the CPU's.
+    fn new(device: &Device, recon: Reconstructor) -> Result<Runner> {
+        #[cfg(feature = "gpu")]
+        if let Some(ctx) = &device.gpu {
+            use specmux_gpu::{GpuError, GpuReconstructor};
+            match GpuReconstructor::new(ctx, &recon) {
+                Ok(g) => {
+                    let cube = g.output_cube();
+                    return Ok(Runner::Gpu(ctx.clone(), Box::new(g), cube));
+                }
+                Err(GpuError::Unsupported(_)) => {}
+                Err(e) => return Err(Error::Numerical(e.to_string())),
+            }
+        }
+        let _ = device;
+        Ok(Runner::Cpu(Box::new(recon)))
+    }
+
+    fn device(&self) -> &'static str {
+        match self {
+            Runner::Cpu(_) => "cpu",
+            #[cfg(feature = "gpu")]
+            Runner::Gpu(..) => "gpu",
+        }
+    }
+
+    /// One run on `frame`, timed from the frame in host memory to the cube in host memory
+    /// (uploads and read-backs included); with `keep`, its outputs too.
+    fn run(&mut self, frame: &Cube, keep: bool) -> Result<Timed> {
+        match self {
+            Runner::Cpu(r) => {
+                let out = r.run(frame, None)?;
+                let kept = keep.then_some((out.xgap, out.cube));
+                Ok((out.seconds.iter().sum(), out.seconds, kept))
+            }
+            #[cfg(feature = "gpu")]
+            Runner::Gpu(ctx, g, cube) => {
+                let gpu = |e: specmux_gpu::GpuError| Error::Numerical(e.to_string());
+                let t = std::time::Instant::now();
+                g.run_into(ctx, frame, cube).map_err(gpu)?;
+                let seconds = t.elapsed().as_secs_f64();
+                let kept = match keep {
+                    true => Some((g.dealias(ctx, frame).map_err(gpu)?.0, cube.clone())),
+                    false => None,
+                };
+                Ok((seconds, [f64::NAN; 3], kept))
+            }
+        }
+    }
+}
+
 /// One row of the work–precision table.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchRow {
     pub label: String,
     pub setting: Setting,
+    /// Where it ran: "cpu" or "gpu" (`Device::describe` names the adapter).
+    pub device: String,
     /// Final cube r̂ against the true cube.
     pub psnr_db: f64,
     pub ssim: f64,
@@ -149,7 +294,8 @@ pub struct BenchRow {
     pub seconds: f64,
     /// Every repeat's wall time, in run order.
     pub seconds_all: Vec<f64>,
-    /// Median wall time of each stage alone: demultiplex, de-alias, unmix.
+    /// Median wall time of each stage alone: demultiplex, de-alias, unmix (NaN, null in JSON,
+    /// on the GPU, which runs them in one submission).
     pub stage_seconds: [f64; 3],
     /// On the Pareto front of (seconds, psnr_db).
     pub pareto: bool,
@@ -216,6 +362,16 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
 /// Reconstruct `sim`'s frame with every setting `repeats` times (the repeats interleaved over
 /// the settings, so that a change of machine load spreads over all of them) and measure it.
 pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Result<Vec<BenchRow>> {
+    work_precision_on(&Device::cpu(), sim, grid, repeats)
+}
+
+/// `work_precision` on `device`: each setting that has a GPU kernel runs there.
+pub fn work_precision_on(
+    device: &Device,
+    sim: &Simulated,
+    grid: &[Setting],
+    repeats: usize,
+) -> Result<Vec<BenchRow>> {
     if repeats == 0 {
         return Err(Error::config(
             "<command line>",
@@ -224,9 +380,9 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
             "must be ≥ 1",
         ));
     }
-    let recons = grid
+    let mut runners = grid
         .iter()
-        .map(|s| reconstructor(sim, s))
+        .map(|s| Runner::new(device, reconstructor(sim, s)?))
         .collect::<Result<Vec<_>>>()?;
     let mut times = vec![Vec::with_capacity(repeats); grid.len()];
     let mut stages = vec![[(); 3].map(|_| Vec::with_capacity(repeats)); grid.len()];
@@ -234,25 +390,31 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
     let bar = crate::progress::bar("work–precision runs");
     bar.set_length((repeats * grid.len()) as u64);
     for _ in 0..repeats {
-        for (k, r) in recons.iter().enumerate() {
+        for (k, r) in runners.iter_mut().enumerate() {
             crate::progress::step(&bar, "the work–precision runs")?;
-            let out = r.run(&sim.frame, None)?;
-            times[k].push(out.seconds.iter().sum());
-            for (v, d) in stages[k].iter_mut().zip(out.seconds) {
+            let (total, seconds, kept) = r.run(&sim.frame, outputs[k].is_none())?;
+            times[k].push(total);
+            for (v, d) in stages[k].iter_mut().zip(seconds) {
                 v.push(d);
             }
-            outputs[k].get_or_insert((out.xgap, out.cube));
+            if kept.is_some() {
+                outputs[k] = kept;
+            }
         }
     }
     bar.finish_and_clear();
     let mut rows = Vec::with_capacity(grid.len());
-    for (((s, t), st), out) in grid.iter().zip(times).zip(stages).zip(outputs) {
+    let devices = runners.iter().map(Runner::device);
+    for ((((s, t), st), out), device) in
+        grid.iter().zip(times).zip(stages).zip(outputs).zip(devices)
+    {
         let (x, cube) = out.expect("repeats ≥ 1 ran every setting");
         let m = metrics::compare(&sim.truth, &cube)?;
         let mx = metrics::compare(&sim.channels, &x)?;
         rows.push(BenchRow {
             label: s.label(),
             setting: *s,
+            device: device.to_string(),
             psnr_db: m.psnr_db,
             ssim: m.ssim,
             sam_deg: m.sam_deg,
@@ -273,20 +435,22 @@ pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Resu
 /// The work–precision table as Markdown (also readable as text).
 pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
     let mut s = String::from(
-        "| setting | r̂ PSNR dB | SSIM | SAM ° | x PSNR dB | median s | demux / de-alias / unmix s | Pareto |\n| --- | --- | --- | --- | --- | --- | --- | --- |\n",
+        "| setting | device | r̂ PSNR dB | SSIM | SAM ° | x PSNR dB | median s | demux / de-alias / unmix s | Pareto |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- |\n",
     );
     for r in rows {
+        let stages = match r.stage_seconds.iter().all(|t| t.is_finite()) {
+            true => r.stage_seconds.map(|t| format!("{t:.3}")).join(" / "),
+            false => "– (one submission)".to_string(),
+        };
         s += &format!(
-            "| {} | {:.2} | {:.4} | {} | {:.2} | {:.4} | {:.3} / {:.3} / {:.3} | {} |\n",
+            "| {} | {} | {:.2} | {:.4} | {} | {:.2} | {:.4} | {stages} | {} |\n",
             r.label,
+            r.device,
             r.psnr_db,
             r.ssim,
             metrics::show(r.sam_deg, 2),
             r.x_psnr_db,
             r.seconds,
-            r.stage_seconds[0],
-            r.stage_seconds[1],
-            r.stage_seconds[2],
             if r.pareto { "●" } else { "" }
         );
     }
@@ -355,15 +519,16 @@ pub fn work_precision_plot(
             (3, Method::Joint, "joint (PDHG, vectorial TV)"),
         ] {
             let color = Palette99::pick(c).to_rgba();
-            let pts: Vec<(f64, f64)> = ok
+            let of_method: Vec<&&BenchRow> =
+                ok.iter().filter(|r| r.setting.method == method).collect();
+            let pts: Vec<(f64, f64)> = of_method
                 .iter()
-                .filter(|r| r.setting.method == method)
                 .map(|r| (r.seconds.ln(), r.psnr_db))
                 .collect();
             chart
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 5, color.filled())))
                 .map_err(|x| e(&x))?
-                .label(name)
+                .label(on_devices(name, &of_method, &ok))
                 .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
         }
         let mut front: Vec<&&BenchRow> = ok.iter().filter(|r| r.pareto).collect();
@@ -409,6 +574,18 @@ pub fn work_precision_plot(
             .draw()
             .map_err(|x| e(&x))
     })
+}
+
+/// A legend entry with the devices its rows ran on, in a bench where some row ran elsewhere
+/// than on the CPU (so a GPU bench marks the methods that stayed on the CPU).
+fn on_devices(name: &str, rows: &[&&BenchRow], all: &[&BenchRow]) -> String {
+    if all.iter().all(|r| r.device == "cpu") {
+        return name.to_string();
+    }
+    let mut devices: Vec<&str> = rows.iter().map(|r| r.device.as_str()).collect();
+    devices.sort();
+    devices.dedup();
+    format!("{name} — {}", devices.join(", ").to_uppercase())
 }
 
 /// The paper's crop fractions: 0.05 to 0.4 of the width in steps of 0.025.
@@ -733,5 +910,65 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.to_string().contains("overlap"), "{e}");
+        assert!(rows.iter().all(|r| r.device == "cpu"));
+        assert!(work_precision_markdown(&rows).contains("| gap 2 it, crop 0.25 square | cpu |"));
+    }
+
+    #[cfg(not(feature = "gpu"))]
+    #[test]
+    fn without_the_gpu_feature_gpu_is_refused_and_auto_stays_on_the_cpu() {
+        let e = Device::open(ComputeDevice::Gpu, "x.toml")
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("x.toml") && e.contains("compute.device") && e.contains("--features gpu"),
+            "{e}"
+        );
+        assert!(Device::open(ComputeDevice::Auto, "x.toml")
+            .unwrap()
+            .describe()
+            .starts_with("CPU"));
+    }
+
+    /// On a GPU (lavapipe counts), the settings with a GPU kernel run there and give the CPU's
+    /// error (issue 17: within 0.01 dB); the joint method stays on the CPU and says so.
+    #[cfg(feature = "gpu")]
+    #[test]
+    fn on_a_gpu_the_rows_say_where_they_ran_and_match_the_cpu() {
+        let device = match Device::open(ComputeDevice::Gpu, "t") {
+            Ok(d) => d,
+            Err(e) => return eprintln!("{e}: GPU test skipped"),
+        };
+        let sim = tiny();
+        let setting = |method, iterations| Setting {
+            method,
+            iterations,
+            crop: 0.25,
+            window: WindowShape::Square,
+        };
+        let grid = [
+            setting(Method::Fourier, 0),
+            setting(Method::Gap, 3),
+            setting(Method::GapTv, 3),
+            setting(Method::Joint, 5),
+        ];
+        let gpu = work_precision_on(&device, &sim, &grid, 1).unwrap();
+        let cpu = work_precision(&sim, &grid, 1).unwrap();
+        let devices: Vec<&str> = gpu.iter().map(|r| r.device.as_str()).collect();
+        assert_eq!(devices, ["gpu", "gpu", "gpu", "cpu"]);
+        for (g, c) in gpu.iter().zip(&cpu) {
+            assert!(
+                (g.psnr_db - c.psnr_db).abs() < 0.01,
+                "{}: {} against {}",
+                g.label,
+                g.psnr_db,
+                c.psnr_db
+            );
+            assert!((g.x_psnr_db - c.x_psnr_db).abs() < 0.01, "{}", g.label);
+        }
+        assert!(gpu[1].stage_seconds[0].is_nan() && gpu[3].stage_seconds[0].is_finite());
+        assert!(work_precision_markdown(&gpu).contains("| gpu |"));
+        assert!(device.describe().starts_with("GPU "));
     }
 }

@@ -93,30 +93,31 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
 }
 
 /// One frame's cube and unmixing counters on the device `[compute] device` names, with a line
-/// of stage times. The GPU (feature `gpu`) runs the `fourier` chain: demultiplex, crosstalk
-/// mix, unmix; GAP is not on the GPU yet, so `gpu` with GAP is an error and `auto` with GAP, or
-/// without an adapter, stays on the CPU and says so in one line.
+/// of stage times. The GPU (feature `gpu`) runs the whole chain of the `fourier`, `gap` and
+/// `gap-tv` methods: demultiplex, de-alias, crosstalk mix, unmix. The joint method is not on
+/// the GPU yet, so `gpu` with it is an error and `auto` with it, or without an adapter, stays
+/// on the CPU and says so in one line.
 fn reconstruct_on_device(
     exp: &Experiment,
     recon: &Reconstructor,
     frame: &Cube,
 ) -> Result<(Cube, UnmixStats, String)> {
-    let fourier = recon.gap.is_none();
-    match (exp.compute.device, fourier) {
+    let joint = recon.joint.is_some();
+    match (exp.compute.device, joint) {
         (ComputeDevice::Cpu, _) => {}
-        (ComputeDevice::Gpu, false) => {
+        (ComputeDevice::Gpu, true) => {
             return Err(Error::config(
                 &exp.file,
                 "compute.device",
                 "gpu",
-                "GAP and GAP-TV are not on the GPU yet: set [reconstruct.gap] method = \"fourier\" or device = \"cpu\"",
+                "the joint method is not on the GPU yet: set [reconstruct.gap] method = \"gap\", \"gap-tv\" or \"fourier\", or device = \"cpu\"",
             ))
         }
-        (ComputeDevice::Auto, false) => {
-            eprintln!("compute device auto: GAP is not on the GPU yet; reconstructing on the CPU")
+        (ComputeDevice::Auto, true) => {
+            eprintln!("compute device auto: the joint method is not on the GPU yet; reconstructing on the CPU")
         }
-        (_, true) => {
-            if let Some(done) = gpu::reconstruct(exp, recon, frame)? {
+        (_, false) => {
+            if let Some(done) = gpu_reconstruct(exp, recon, frame)? {
                 return Ok(done);
             }
         }
@@ -128,56 +129,41 @@ fn reconstruct_on_device(
     Ok((r.cube, r.unmix, times))
 }
 
-/// The GPU's `fourier` chain (specmux-gpu), or None where `auto` found no adapter.
+/// The GPU's chain (specmux-gpu), or None where `auto` found no adapter.
 #[cfg(feature = "gpu")]
-mod gpu {
-    use super::*;
-
-    pub fn reconstruct(
-        exp: &Experiment,
-        recon: &Reconstructor,
-        frame: &Cube,
-    ) -> Result<Option<(Cube, UnmixStats, String)>> {
-        let err = |e: specmux_gpu::GpuError| Error::Numerical(e.to_string());
-        let Some(ctx) = specmux_gpu::backend::open(exp.compute.device).map_err(err)? else {
-            return Ok(None);
-        };
-        let t = std::time::Instant::now();
-        let g = specmux_gpu::GpuReconstructor::new(&ctx, recon).map_err(err)?;
-        let t_setup = t.elapsed().as_secs_f64();
-        let mut cube = g.output_cube();
-        let t = std::time::Instant::now();
-        let stats = g.run_into(&ctx, frame, &mut cube).map_err(err)?;
-        let times = format!(
-            "GPU {}: setup {t_setup:.4} s, demultiplex + unmix {:.4} s (first frame)",
-            ctx.adapter_name(),
-            t.elapsed().as_secs_f64()
-        );
-        Ok(Some((cube, stats, times)))
-    }
+fn gpu_reconstruct(
+    exp: &Experiment,
+    recon: &Reconstructor,
+    frame: &Cube,
+) -> Result<Option<(Cube, UnmixStats, String)>> {
+    let device = crate::bench::Device::open(exp.compute.device, &exp.file)?;
+    let Some(ctx) = &device.gpu else {
+        return Ok(None);
+    };
+    let err = |e: specmux_gpu::GpuError| Error::Numerical(e.to_string());
+    let t = std::time::Instant::now();
+    let g = specmux_gpu::GpuReconstructor::new(ctx, recon).map_err(err)?;
+    let t_setup = t.elapsed().as_secs_f64();
+    let mut cube = g.output_cube();
+    let t = std::time::Instant::now();
+    let run = g.run_into(ctx, frame, &mut cube).map_err(err)?;
+    let times = format!(
+        "{}: setup {t_setup:.4} s, demultiplex + de-alias ({} iterations) + unmix {:.4} s (first frame)",
+        device.describe(),
+        run.gap.iterations,
+        t.elapsed().as_secs_f64()
+    );
+    Ok(Some((cube, run.unmix, times)))
 }
 
 /// Without the `gpu` feature: `gpu` is an error, `auto` stays on the CPU and says so.
 #[cfg(not(feature = "gpu"))]
-mod gpu {
-    use super::*;
-
-    pub fn reconstruct(
-        exp: &Experiment,
-        _: &Reconstructor,
-        _: &Cube,
-    ) -> Result<Option<(Cube, UnmixStats, String)>> {
-        if exp.compute.device == ComputeDevice::Gpu {
-            return Err(Error::config(
-                &exp.file,
-                "compute.device",
-                "gpu",
-                "this specmux was built without the GPU backend: cargo build --release --features gpu",
-            ));
-        }
-        eprintln!("compute device auto: built without the gpu feature; reconstructing on the CPU");
-        Ok(None)
-    }
+fn gpu_reconstruct(
+    exp: &Experiment,
+    _: &Reconstructor,
+    _: &Cube,
+) -> Result<Option<(Cube, UnmixStats, String)>> {
+    crate::bench::Device::open(exp.compute.device, &exp.file).map(|_| None)
 }
 
 fn band_names(grid: &Grid) -> Vec<String> {
@@ -238,25 +224,32 @@ fn write_run_files(
     specmux_io::json::write_json(&files.path("report.json"), rep)
 }
 
+/// `device`: `--device` (None: the experiment's `[compute] device`).
 pub fn bench(
     scene: &str,
     out: &Path,
     repeats: usize,
     size: Option<usize>,
+    device: Option<ComputeDevice>,
     lib: &Library,
 ) -> Result<String> {
     let mut text = String::new();
     let exp = experiment_for(scene, size)?;
     let sim = crate::bench::simulate(&exp, lib)?;
-    let threads = rayon::current_num_threads();
+    let device = match device {
+        Some(d) => crate::bench::Device::open(d, "--device")?,
+        None => crate::bench::Device::open(exp.compute.device, &exp.file)?,
+    };
     say!(
         text,
-        "{}: {}×{}, {repeats} timed runs per setting, {threads} threads",
+        "{}: {}×{}, {repeats} timed runs per setting, on {}",
         exp.file,
         sim.frame.width,
-        sim.frame.height
+        sim.frame.height,
+        device.describe()
     );
-    let rows = crate::bench::work_precision(&sim, &crate::bench::default_grid(), repeats)?;
+    let rows =
+        crate::bench::work_precision_on(&device, &sim, &crate::bench::default_grid(), repeats)?;
     let md = crate::bench::work_precision_markdown(&rows);
     say!(text, "{md}");
     let files = OutputSet::begin(out)?;
@@ -265,8 +258,11 @@ pub fn bench(
     crate::bench::work_precision_plot(
         &files.path("pareto.png"),
         &format!(
-            "{} {}×{}: error against run time ({threads} threads)",
-            scene, sim.frame.width, sim.frame.height
+            "{} {}×{}: error against run time, {}",
+            scene,
+            sim.frame.width,
+            sim.frame.height,
+            device.short()
         ),
         &rows,
         sim.frame.pixels(),

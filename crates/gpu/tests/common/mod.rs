@@ -4,7 +4,7 @@
 // Each test file uses only some of these helpers.
 #![allow(dead_code)]
 
-use specmux_gpu::{GpuContext, GpuError};
+use specmux_gpu::{wgpu, GpuContext, GpuError};
 
 /// The GPU context, or None (with one printed line) when this machine has no adapter.
 pub fn context() -> Option<GpuContext> {
@@ -34,4 +34,11 @@ pub fn noise(len: usize, seed: u64) -> Vec<f32> {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     (0..len).map(|_| rng.gen_range(-1.0..1.0)).collect()
+}
+
+/// A storage buffer holding `data` that can be read back (`GpuContext::read`).
+pub fn upload<T: bytemuck::Pod>(ctx: &GpuContext, label: &str, data: &[T]) -> wgpu::Buffer {
+    let buf = ctx.storage(label, std::mem::size_of_val(data) as u64);
+    ctx.queue.write_buffer(&buf, 0, bytemuck::cast_slice(data));
+    buf
 }
