@@ -85,6 +85,9 @@ def test_design_filters_ranks_every_criterion(filters, catalogue):
     assert "[rig.wheel]" in r["toml"]
     assert all(f'"{f}"' in r["toml"] for f in chosen["filters"])
     assert r["out"] is None and r["provenance"]["schema_version"] >= 1
+    # The temporary folder is gone on return, so the text does not name it.
+    assert "specmux-design-filters-" not in r["text"]
+    assert "(a temporary folder, removed; pass out= to keep the files)" in r["text"]
 
 
 def test_design_filters_matches_the_cli(filters, catalogue, cli, tmp_path):

@@ -32,6 +32,26 @@ pub struct CalibrationFrames {
     pub source: String,
 }
 
+impl CalibrationFrames {
+    /// Single captures handed in from outside (files, arrays): raw when a dark frame comes with
+    /// them, already linear when none does.
+    pub fn single(
+        dark: Option<Cube>,
+        flat: Option<Cube>,
+        patterns: Cube,
+        source: String,
+    ) -> CalibrationFrames {
+        CalibrationFrames {
+            patterns_linear: dark.is_none(),
+            dark,
+            flat,
+            patterns,
+            frames_averaged: 1,
+            source,
+        }
+    }
+}
+
 /// One carrier as the calibration measured it.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct MeasuredCarrier {

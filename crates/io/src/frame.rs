@@ -114,14 +114,7 @@ pub fn read_calibration(
             msg: format!("the experiment has {n} carriers, so pattern-1 … pattern-{n} only"),
         });
     }
-    Ok(CalibrationFrames {
-        patterns_linear: dark.is_none(),
-        dark,
-        flat,
-        patterns,
-        frames_averaged: 1,
-        source: format!("files in {}", dir.display()),
-    })
+    Ok(CalibrationFrames::single(dark, flat, patterns, format!("files in {}", dir.display())))
 }
 
 /// Write `frames` as a calibration folder `read_calibration` reads back (EXR, one channel each).

@@ -62,14 +62,7 @@ pub fn from_dict(d: &Bound<'_, PyAny>, width: usize, height: usize) -> PyResult<
             ))
         }
     };
-    Ok(CalibrationFrames {
-        patterns_linear: dark.is_none(),
-        dark,
-        flat,
-        patterns,
-        frames_averaged: 1,
-        source: SOURCE.into(),
-    })
+    Ok(CalibrationFrames::single(dark, flat, patterns, SOURCE.into()))
 }
 
 /// The pattern frames: a list or tuple of (h, w) arrays, or one (n, h, w) array.

@@ -151,6 +151,18 @@ impl OutDir {
         (!self.temporary).then(|| self.path.display().to_string())
     }
 
+    /// The command's printed text for the caller: a temporary folder is removed on return, so
+    /// its path is replaced by a note saying so rather than left pointing nowhere.
+    pub fn text(&self, text: String) -> String {
+        if !self.temporary {
+            return text;
+        }
+        text.replace(
+            &self.path.display().to_string(),
+            "(a temporary folder, removed; pass out= to keep the files)",
+        )
+    }
+
     /// Read a UTF-8 file the command wrote.
     pub fn read(&self, name: &str) -> PyResult<String> {
         let p = self.path.join(name);

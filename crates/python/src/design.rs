@@ -141,7 +141,7 @@ fn finish(
 ) -> PyResult<()> {
     d.set_item("report", to_py(py, &design)?)?;
     d.set_item("provenance", to_py(py, &provenance)?)?;
-    d.set_item("text", text)?;
+    d.set_item("text", dir.text(text))?;
     d.set_item("out", dir.kept())
 }
 

@@ -51,7 +51,7 @@ pub fn rehearse<'py>(
     d.set_item("passes", plan.verify().is_ok())?;
     d.set_item("out", dir.kept())?;
     if dry_run {
-        d.set_item("text", controller::dry_run(&plan, text))?;
+        d.set_item("text", dir.text(controller::dry_run(&plan, text)))?;
         return Ok(d);
     }
     let lib = library(spectra);
@@ -60,7 +60,7 @@ pub fn rehearse<'py>(
         controller::rehearsal(&e, &plan, faults, &path, cubes, &lib)
     })?
     .map_err(err)?;
-    d.set_item("text", text + &r.text())?;
+    d.set_item("text", dir.text(text + &r.text()))?;
     d.set_item("frames", to_py(py, &r.rows)?)?;
     let arrays = r
         .cubes
