@@ -7,6 +7,7 @@
 //! it, so an interrupted acquisition leaves a readable, complete prefix.
 
 use crate::error::{Error, Result};
+use specmux_io::exr::MAX_SAMPLES;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
@@ -236,17 +237,25 @@ pub fn read(path: &Path) -> Result<(String, Vec<Page>)> {
     File::open(path)
         .and_then(|mut f| f.read_to_end(&mut bytes))
         .map_err(|e| Error::io(path, e))?;
+    parse(&bytes, path)
+}
+
+/// [`read`] over bytes already in memory; `path` names the file in errors. An IFD chain that
+/// loops back on itself, or pages of more samples in all than the EXR reader takes
+/// ([`MAX_SAMPLES`], 1 GiB of f32), are refused.
+pub fn parse(bytes: &[u8], path: &Path) -> Result<(String, Vec<Page>)> {
     let bad = |why: &str| Error::device("recorder", format!("{}: {why}", path.display()));
     if bytes.len() < 8 || &bytes[..4] != b"II*\0" {
         return Err(bad("not a little-endian TIFF"));
     }
-    let mut at = u32_at(&bytes, 4).ok_or_else(|| bad("truncated header"))? as usize;
+    let mut at = u32_at(bytes, 4).ok_or_else(|| bad("truncated header"))? as usize;
     let (mut description, mut pages) = (String::new(), Vec::new());
+    let (mut seen, mut samples) = (std::collections::HashSet::new(), 0usize);
     while at != 0 {
-        if pages.len() > 10_000_000 {
-            return Err(bad("IFD chain does not end"));
+        if !seen.insert(at) {
+            return Err(bad(&format!("the IFD chain loops back to offset {at}")));
         }
-        let (tags, next) = ifd(&bytes, at).map_err(|why| bad(&why))?;
+        let (tags, next) = ifd(bytes, at).map_err(|why| bad(&why))?;
         if let Some(&(count, off)) = tags.get(&TAG_DESCRIPTION).filter(|_| pages.is_empty()) {
             let raw = bytes
                 .get(off..off + count)
@@ -255,7 +264,15 @@ pub fn read(path: &Path) -> Result<(String, Vec<Page>)> {
                 .trim_end_matches(['\0', ' '])
                 .to_string();
         }
-        pages.push(page(&bytes, &tags).map_err(|why| bad(&why))?);
+        let page = page(bytes, &tags).map_err(|why| bad(&why))?;
+        samples += page.data.len();
+        if samples > MAX_SAMPLES {
+            return Err(bad(&format!(
+                "more than {MAX_SAMPLES} samples in {} pages: too large to read",
+                pages.len() + 1
+            )));
+        }
+        pages.push(page);
         at = next;
     }
     Ok((description, pages))
@@ -431,6 +448,31 @@ mod tests {
             .contains("beyond the end"));
         std::fs::write(&path, b"MM\0*").unwrap();
         assert!(read(&path).is_err());
+    }
+
+    /// A file of one 2×2 u16 page whose IFD's next pointer is `next(ifd offset)`.
+    fn one_page_linked_to(name: &str, next: impl Fn(u32) -> u32) -> Vec<u8> {
+        let path = tmp(name);
+        let mut w = TiffWriter::create(&path, 2, 2, Sample::U16, 64).unwrap();
+        w.append(&[1, 0, 2, 0, 3, 0, 4, 0]).unwrap();
+        let mut b = std::fs::read(&path).unwrap();
+        let at = u32_at(&b, 4).unwrap();
+        let n = u16_at(&b, at as usize).unwrap() as usize;
+        let link = at as usize + 2 + 12 * n;
+        b[link..link + 4].copy_from_slice(&next(at).to_le_bytes());
+        b
+    }
+
+    #[test]
+    fn an_ifd_chain_that_loops_is_refused_naming_the_offset() {
+        let b = one_page_linked_to("loop", |at| at);
+        let at = u32_at(&b, 4).unwrap();
+        let e = parse(&b, Path::new("f.ome.tif")).unwrap_err().to_string();
+        assert!(e.contains(&format!("loops back to offset {at}")), "{e}");
+        assert_eq!(e.lines().count(), 1);
+        // Linked to nothing, the same bytes read as one page.
+        let (_, pages) = parse(&one_page_linked_to("end", |_| 0), Path::new("f")).unwrap();
+        assert_eq!(pages[0].data, vec![1.0, 2.0, 3.0, 4.0]);
     }
 
     #[test]

@@ -47,11 +47,24 @@ pub fn read(path: &Path) -> Result<Cube> {
 
 /// A 16-bit greyscale PNG or TIFF as DN.
 fn read_grey16(path: &Path) -> Result<Cube> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    grey16_from_bytes(&bytes, path)
+}
+
+/// [`read_grey16`] over bytes in memory (`path` names them in errors): the format is sniffed
+/// from the bytes, and an image over the EXR reader's sample limit is refused before decoding.
+pub fn grey16_from_bytes(bytes: &[u8], path: &Path) -> Result<Cube> {
     let bad = |msg: String| Error::Image {
         path: path.to_path_buf(),
         msg,
     };
-    let img = image::open(path).map_err(|e| bad(e.to_string()))?;
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| bad(e.to_string()))?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(4 * exr::MAX_SAMPLES as u64);
+    reader.limits(limits);
+    let img = reader.decode().map_err(|e| bad(e.to_string()))?;
     let image::DynamicImage::ImageLuma16(g) = img else {
         return Err(bad(format!(
             "a {:?} image is a preview, not a camera frame: pass frame.exr or a 16-bit greyscale PNG or TIFF of raw DN",
@@ -114,7 +127,12 @@ pub fn read_calibration(
             msg: format!("the experiment has {n} carriers, so pattern-1 … pattern-{n} only"),
         });
     }
-    Ok(CalibrationFrames::single(dark, flat, patterns, format!("files in {}", dir.display())))
+    Ok(CalibrationFrames::single(
+        dark,
+        flat,
+        patterns,
+        format!("files in {}", dir.display()),
+    ))
 }
 
 /// Write `frames` as a calibration folder `read_calibration` reads back (EXR, one channel each).
