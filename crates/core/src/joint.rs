@@ -83,9 +83,9 @@ impl Default for JointConfig {
             weight_rule: WeightRule::Fixed,
             search_iterations: 25,
             noise_weights: true,
-            pnp_weight: 1.0,
+            pnp_weight: 0.01,
             pnp_edge: 1.0,
-            pnp_passes: 2,
+            pnp_passes: 4,
         }
     }
 }

@@ -469,3 +469,43 @@ fn demixing(
     }
     Ok((Some(m), zw))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The discrepancy rule needs a noise model with its weights on; the errors name the file,
+    /// the key and the reason.
+    #[test]
+    fn the_discrepancy_rule_without_a_noise_model_is_refused() {
+        let cfg = JointConfig {
+            weight_rule: WeightRule::Discrepancy,
+            ..Default::default()
+        };
+        let e = joint_noise(&cfg, None, "rig.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("rig.toml")
+                && e.contains("reconstruct.joint.weight_rule")
+                && e.contains("[rig.sensor]"),
+            "{e}"
+        );
+        let nm = NoiseModel {
+            gain_dn_per_e: 0.25,
+            dark_noise_dn: 0.8,
+        };
+        assert_eq!(joint_noise(&cfg, Some(nm), "rig.toml").unwrap(), Some(nm));
+        let off = JointConfig {
+            noise_weights: false,
+            ..cfg
+        };
+        let e = joint_noise(&off, Some(nm), "rig.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("noise_weights = true"), "{e}");
+        let fixed = JointConfig {
+            noise_weights: false,
+            ..Default::default()
+        };
+        assert_eq!(joint_noise(&fixed, Some(nm), "rig.toml").unwrap(), None);
+    }
+}
