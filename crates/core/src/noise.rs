@@ -67,7 +67,7 @@ fn flat_gains(df: &DarkFlat, y: &Cube) -> Result<Vec<f64>> {
         .zip(&df.dark.data)
         .map(|(&f, &d)| f as f64 - d as f64)
         .collect();
-    if let Some(i) = resp.iter().position(|&r| !(r > 0.0)) {
+    if let Some(i) = resp.iter().position(|&r| r.is_nan() || r <= 0.0) {
         return Err(Error::Numerical(format!(
             "noise weights: flat − dark = {} DN at pixel {i}; the flat must be brighter",
             resp[i]

@@ -480,6 +480,7 @@ mod tests {
     fn the_discrepancy_rule_without_a_noise_model_is_refused() {
         let cfg = JointConfig {
             weight_rule: WeightRule::Discrepancy,
+            noise_weights: true,
             ..Default::default()
         };
         let e = joint_noise(&cfg, None, "rig.toml").unwrap_err().to_string();

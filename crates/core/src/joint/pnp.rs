@@ -49,7 +49,7 @@ pub fn run(
         .map(|(ap, &om)| om as f64 * ap.iter().map(|&v| (v as f64).powi(2)).sum::<f64>())
         .sum::<f64>()
         / (w * h) as f64;
-    if !(weight > 0.0) {
+    if weight.is_nan() || weight <= 0.0 {
         return Err(Error::Numerical(
             "joint (plug-and-play): every data weight is zero; the frame says nothing of α".into(),
         ));
