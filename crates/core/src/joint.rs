@@ -1096,6 +1096,22 @@ mod tests {
         assert!(stats.objective.iter().all(|v| v.is_finite()));
     }
 
+    /// The frame of `t` with its first 22 of 32 rows (70 %) clipped to 0.6 of its peak.
+    fn clipped_frame(j: &Joint, t: &Cube) -> Cube {
+        let mut y = frame_of(j, t);
+        let top = y.max() * 0.6;
+        y.data.iter_mut().take(32 * 22).for_each(|v| *v = top);
+        y
+    }
+
+    /// F with its first two filters alike to 10⁻⁹.
+    fn near_singular(b: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut f = system(b);
+        let row = f.row(0).clone_owned();
+        f.set_row(1, &(row * (1.0 + 1e-9)));
+        f
+    }
+
     #[test]
     fn stiff_cases_stay_finite_or_are_refused() {
         let cfg = JointConfig {
@@ -1109,9 +1125,7 @@ mod tests {
         assert!(est.data.iter().all(|&v| v == 0.0) && st.objective.iter().all(|&v| v == 0.0));
         // 70 % of the frame clipped to one value: finite, and the objective falls below the seed's.
         let t = truth(32, 32);
-        let mut y = frame_of(&j, &t);
-        let top = y.max() * 0.6;
-        y.data.iter_mut().take(32 * 22).for_each(|v| *v = top);
+        let y = clipped_frame(&j, &t);
         let (est, st) = j.run(&y, &flat_seed(&t), None).unwrap();
         assert!(est.all_finite() && st.objective.iter().all(|v| v.is_finite()));
         assert!(
@@ -1121,9 +1135,7 @@ mod tests {
         );
         // Two filters alike to 1e-9 (F near-singular): the prior keeps the problem posed.
         let b = basis();
-        let mut f = system(&b);
-        let row = f.row(0).clone_owned();
-        f.set_row(1, &(row * (1.0 + 1e-9)));
+        let f = near_singular(&b);
         let near = Joint::new(&patterns(32, 32), &f, &b, 1.0, &cfg, "t.toml").unwrap();
         let (est, st) = near
             .run(&frame_of(&near, &t), &flat_seed(&t), None)
@@ -1259,15 +1271,11 @@ mod tests {
         let (est, st) = j.run(&zero, &Cube::zeros(32, 32, 4), None).unwrap();
         assert!(est.data.iter().all(|&v| v == 0.0) && st.fixed_point.iter().all(|&v| v == 0.0));
         let t = truth(32, 32);
-        let mut y = frame_of(&j, &t);
-        let top = y.max() * 0.6;
-        y.data.iter_mut().take(32 * 22).for_each(|v| *v = top);
+        let y = clipped_frame(&j, &t);
         let (est, st) = j.run(&y, &flat_seed(&t), None).unwrap();
         assert!(est.all_finite() && st.objective.iter().all(|v| v.is_finite()));
         let b = basis();
-        let mut f = system(&b);
-        let row = f.row(0).clone_owned();
-        f.set_row(1, &(row * (1.0 + 1e-9)));
+        let f = near_singular(&b);
         let near = Joint::new(&patterns(32, 32), &f, &b, 1.0, &pnp(100), "t.toml").unwrap();
         let (est, _) = near
             .run(&frame_of(&near, &t), &flat_seed(&t), None)
@@ -1278,27 +1286,21 @@ mod tests {
             .run(&y, &flat_seed(&t), Some(&Cube::zeros(32, 32, 1)))
             .unwrap_err();
         assert!(e.to_string().contains("weight"), "{e}");
-        let bad = JointConfig {
+        let refused = |bad: JointConfig, key: &str| {
+            let e = Joint::new(&patterns(32, 32), &system(&b), &b, 1.0, &bad, "t.toml")
+                .err()
+                .unwrap();
+            assert!(e.to_string().contains(key), "{e}");
+        };
+        let zero_weight = JointConfig {
             pnp_weight: 0.0,
             ..pnp(10)
         };
-        let e = Joint::new(&patterns(32, 32), &system(&b), &b, 1.0, &bad, "t.toml")
-            .err()
-            .unwrap();
-        assert!(
-            e.to_string().contains("reconstruct.joint.pnp_weight"),
-            "{e}"
-        );
-        let bad = JointConfig {
+        refused(zero_weight, "reconstruct.joint.pnp_weight");
+        let discrepancy = JointConfig {
             weight_rule: WeightRule::Discrepancy,
             ..pnp(10)
         };
-        let e = Joint::new(&patterns(32, 32), &system(&b), &b, 1.0, &bad, "t.toml")
-            .err()
-            .unwrap();
-        assert!(
-            e.to_string().contains("reconstruct.joint.weight_rule"),
-            "{e}"
-        );
+        refused(discrepancy, "reconstruct.joint.weight_rule");
     }
 }
