@@ -9,7 +9,8 @@ use crate::carriers::Carrier;
 use crate::demux::{Demux, WindowShape, SUPER_GAUSSIAN_ORDER};
 use crate::error::{Error, Result};
 use crate::gap::{Gap, GapConfig, GapStats, Method};
-use crate::joint::{Joint, JointConfig, JointStats};
+use crate::joint::{Joint, JointConfig, JointStats, WeightRule};
+use crate::noise::NoiseModel;
 use crate::unmix::{UnmixStats, Unmixer};
 use crate::Cube;
 use nalgebra::DMatrix;
@@ -36,6 +37,9 @@ pub struct Design {
     /// w_ik (filter i, pattern k) of one exposure as the programmed timing predicts; None when
     /// each pattern sees only its own filter.
     pub exposure_weights: Option<Vec<Vec<f64>>>,
+    /// The camera's temporal noise (EMVA 1288 gain and dark noise, from its photon-transfer
+    /// measurement); None when the frames are noiseless or the camera is not characterised.
+    pub noise: Option<NoiseModel>,
 }
 
 /// Where the reconstruction takes the exposure weights w_ik from.
@@ -182,6 +186,8 @@ pub struct Reconstructor {
     pub joint: Option<Joint>,
     /// Per-band output gains of a lit radiance scene (the joint method's cube is diag(g)·Bα).
     gains: Option<Vec<f64>>,
+    /// The noise model the joint method weighs its data term by (None: ω = 1).
+    noise: Option<NoiseModel>,
     /// What `method = "auto"` picked and why (None for the other methods).
     pub auto: Option<Choice>,
     pub unmixer: Unmixer,
@@ -266,11 +272,16 @@ impl Reconstructor {
             }
             _ => None,
         };
+        let noise = match joint {
+            Some(_) => joint_noise(&cfg.joint, design.noise, file)?,
+            None => None,
+        };
         Ok(Reconstructor {
             demux,
             gap,
             joint,
             gains: design.output_gains.clone(),
+            noise,
             auto: None,
             unmixer: unmixer(cfg, design).map_err(|e| {
                 e.within(
@@ -294,7 +305,12 @@ impl Reconstructor {
         let xhat = self.to_channels(&zhat)?;
         let t1 = t.elapsed().as_secs_f64();
         if let Some(j) = &self.joint {
-            let (alpha, mut stats) = j.run(&measured, &self.unconstrained_alpha(&xhat)?, None)?;
+            let omega = match &self.noise {
+                Some(nm) => Some(nm.weights(&measured, self.calibration.dark_flat.as_ref())?),
+                None => None,
+            };
+            let seed = self.unconstrained_alpha(&xhat)?;
+            let (alpha, mut stats) = j.run(&measured, &seed, omega.as_ref())?;
             let t2 = t.elapsed().as_secs_f64();
             let (cube, violation) = j.cube(&alpha, self.gains.as_deref())?;
             stats.violation = violation;
@@ -389,6 +405,32 @@ pub fn unmixer(cfg: &ReconConfig, design: &Design) -> Result<Unmixer> {
     }
 }
 
+/// The noise model the joint method uses: the design's when `noise_weights` is on; the
+/// discrepancy rule without one is refused (there is no noise level for the residual to match).
+fn joint_noise(
+    cfg: &JointConfig,
+    noise: Option<NoiseModel>,
+    file: &str,
+) -> Result<Option<NoiseModel>> {
+    let used = noise.filter(|_| cfg.noise_weights);
+    if let Some(nm) = &used {
+        nm.validate(file)?;
+    }
+    if cfg.weight_rule == WeightRule::Discrepancy && used.is_none() {
+        let why = match noise {
+            None => "needs the camera's noise model ([rig.sensor] in the twin): without it there is no noise level for the residual to match",
+            Some(_) => "needs noise_weights = true (the residual is matched in units of the noise)",
+        };
+        return Err(Error::config(
+            file,
+            "reconstruct.joint.weight_rule",
+            "\"discrepancy\"",
+            why,
+        ));
+    }
+    Ok(used)
+}
+
 /// The white target gives z_k(white)·s̃_k: divided by the design's z_k(white), the carriers
 /// come out in the units of the exposed channels z_k.
 fn in_exposed_units(measured: &[MeasuredCarrier], exposed_white: &[f64]) -> Vec<MeasuredCarrier> {
@@ -426,4 +468,45 @@ fn demixing(
         )));
     }
     Ok((Some(m), zw))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The discrepancy rule needs a noise model with its weights on; the errors name the file,
+    /// the key and the reason.
+    #[test]
+    fn the_discrepancy_rule_without_a_noise_model_is_refused() {
+        let cfg = JointConfig {
+            weight_rule: WeightRule::Discrepancy,
+            noise_weights: true,
+            ..Default::default()
+        };
+        let e = joint_noise(&cfg, None, "rig.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("rig.toml")
+                && e.contains("reconstruct.joint.weight_rule")
+                && e.contains("[rig.sensor]"),
+            "{e}"
+        );
+        let nm = NoiseModel {
+            gain_dn_per_e: 0.25,
+            dark_noise_dn: 0.8,
+        };
+        assert_eq!(joint_noise(&cfg, Some(nm), "rig.toml").unwrap(), Some(nm));
+        let off = JointConfig {
+            noise_weights: false,
+            ..cfg
+        };
+        let e = joint_noise(&off, Some(nm), "rig.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("noise_weights = true"), "{e}");
+        let fixed = JointConfig {
+            noise_weights: false,
+            ..Default::default()
+        };
+        assert_eq!(joint_noise(&fixed, Some(nm), "rig.toml").unwrap(), None);
+    }
 }

@@ -8,10 +8,12 @@ use crate::optics::wheel::ColorWheel;
 use crate::optics::wheel::Projection;
 use crate::scene::Materials;
 use crate::scene::Quantity;
+use crate::sensor::SensorConfig;
 use crate::timing;
 use specmux_core::carriers;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
+use specmux_core::noise::NoiseModel;
 use specmux_core::reconstructor::Design;
 use specmux_core::spectral::Basis;
 use specmux_core::spectral::Curve;
@@ -42,6 +44,19 @@ pub struct Rig {
     pub exposure_weights: Option<Vec<Vec<f64>>>,
     /// What the operator should know about the rig as built (snapped carriers, timing).
     pub warnings: Vec<String>,
+    /// The camera's noise as its photon-transfer measurement gives it; None without `[rig.sensor]`.
+    pub noise: Option<NoiseModel>,
+}
+
+/// K and σ_y.dark of a camera, the figures an EMVA 1288 measurement reports:
+/// σ_y.dark² = K²(σ_d² + μ_dark) + 1/12 DN² (read noise, dark-current shot noise at the
+/// exposure, uniform quantisation).
+pub fn noise_model(s: &SensorConfig) -> NoiseModel {
+    let k = s.gain_dn_per_e;
+    NoiseModel {
+        gain_dn_per_e: k,
+        dark_noise_dn: (k * k * (s.read_noise_e.powi(2) + s.dark_electrons()) + 1.0 / 12.0).sqrt(),
+    }
 }
 
 /// Refuse a channel that sees no light on the cube's bands, naming its cause: an illuminant
@@ -164,6 +179,7 @@ impl Rig {
             height: exp.scene.size[1],
             exposure_weights,
             warnings,
+            noise: exp.rig.sensor.as_ref().map(noise_model),
         })
     }
 
@@ -179,6 +195,7 @@ impl Rig {
             band_step_nm: self.grid.step_nm,
             white: self.white(),
             exposure_weights: self.exposure_weights.clone(),
+            noise: self.noise,
         }
     }
 
@@ -259,5 +276,45 @@ impl Rig {
     /// linear on the grid.
     pub fn system_matrix(&self) -> nalgebra::DMatrix<f64> {
         &self.projection.w * self.prior()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensor::Sensor;
+
+    /// The default camera by hand: K = 0.25 DN/e⁻, σ_d² = 10 e⁻², dark current 30 e⁻/s ×
+    /// 2^((22 − 30)/8) × 0.04 s = 0.6 e⁻, so σ_y.dark² = 0.0625 × 10.6 + 1/12 = 0.745833 DN².
+    #[test]
+    fn the_noise_model_of_the_default_camera_by_hand() {
+        let m = noise_model(&SensorConfig::default());
+        assert_eq!(m.gain_dn_per_e, 0.25);
+        assert!(
+            (m.dark_noise_dn.powi(2) - 0.745_833_3).abs() < 1e-6,
+            "{m:?}"
+        );
+    }
+
+    /// The model against the simulated camera: the temporal variance of dark exposures (half
+    /// the variance of the difference of two, which removes the DSNU) is σ_y.dark² within 3 %.
+    #[test]
+    fn the_noise_model_matches_the_simulated_dark_frames() {
+        let cfg = SensorConfig::default();
+        let s = Sensor::new(&cfg, 256, 256).unwrap();
+        let (a, b) = (s.dark_exposure(0), s.dark_exposure(1));
+        let d: Vec<f64> = a
+            .data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| (x - y) as f64)
+            .collect();
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        let var = d.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (d.len() - 1) as f64 / 2.0;
+        let model = noise_model(&cfg).dark_noise_dn.powi(2);
+        assert!(
+            (var / model - 1.0).abs() < 0.03,
+            "sample {var:.4} against {model:.4} DN²"
+        );
     }
 }

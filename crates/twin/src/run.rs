@@ -465,7 +465,37 @@ impl RunReport {
                 j.objective.last().copied().unwrap_or(f64::NAN),
                 j.violation
             );
+            s += &joint_noise_line(j);
         }
         s
     }
+}
+
+/// The joint method's prior, data weights, weighted residual and λ rule in one line.
+fn joint_noise_line(j: &specmux_core::joint::JointStats) -> String {
+    let weights = if j.noise_weights {
+        "noise weights ω = 1/var(y), Σωr²/N"
+    } else {
+        "uniform weights, Σr²/N (frame units²)"
+    };
+    let mut s = format!(
+        "joint prior {}: {weights} = {:.3}",
+        j.prior, j.residual_ratio
+    );
+    if let Some(d) = &j.discrepancy {
+        s += &format!(
+            "; λ by the discrepancy principle: {:.3e} after {} trials ({})",
+            d.lambda,
+            d.trials.len(),
+            if d.reached {
+                "Σωr²/N within 10 % of 1"
+            } else {
+                "not reached: closest trial taken"
+            }
+        );
+    }
+    if let (Some(first), Some(last)) = (j.fixed_point.first(), j.fixed_point.last()) {
+        s += &format!("; ADMM fixed-point residual {first:.3e} → {last:.3e}");
+    }
+    s + "\n"
 }

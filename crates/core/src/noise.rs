@@ -1,0 +1,161 @@
+//! The camera's temporal noise as its EMVA 1288 photon-transfer measurement gives it (gain K and
+//! dark noise σ_y.dark), and the per-pixel inverse variances ω of a dark/flat-corrected frame
+//! that the joint reconstruction weighs its data term by (docs/joint.md, "Noise-aware weights").
+
+use crate::calibration::DarkFlat;
+use crate::error::{Error, Result};
+use crate::Cube;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// EMVA 1288 linear camera model: σ_y² = σ_y.dark² + K·(μ_y − μ_y.dark) in DN².
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NoiseModel {
+    /// Overall system gain K (DN per electron).
+    pub gain_dn_per_e: f64,
+    /// Temporal dark noise σ_y.dark (DN rms) at the rig's exposure: read noise, dark-current
+    /// shot noise and quantisation together, as the photon-transfer dark point measures it.
+    pub dark_noise_dn: f64,
+}
+
+impl NoiseModel {
+    /// Both figures finite and > 0 (quantisation alone gives σ_y.dark ≥ 1/√12 DN); the error
+    /// names `what` (where the model came from) and the value.
+    pub fn validate(&self, what: &str) -> Result<()> {
+        for (key, v) in [
+            ("gain_dn_per_e", self.gain_dn_per_e),
+            ("dark_noise_dn", self.dark_noise_dn),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::Numerical(format!(
+                    "{what}: noise model {key} = {v} must be finite and > 0"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// ω_p = 1/var(y_p) of a linearised frame y = g⊙(raw − dark), g_p the flat-field gain
+    /// mean(flat − dark)/(flat_p − dark_p): var(y_p) = g_p²σ_y.dark² + g_p·K·max(y_p, 0).
+    /// Without a dark/flat correction g = 1 (the frame is taken as raw DN above dark).
+    pub fn weights(&self, y: &Cube, dark_flat: Option<&DarkFlat>) -> Result<Cube> {
+        self.validate("noise weights")?;
+        let gains = match dark_flat {
+            Some(df) => flat_gains(df, y)?,
+            None => vec![1.0; y.pixels()],
+        };
+        let (s2, k) = (self.dark_noise_dn.powi(2), self.gain_dn_per_e);
+        let data = y
+            .data
+            .par_iter()
+            .zip(&gains)
+            .map(|(&v, &g)| (1.0 / (g * g * s2 + g * k * (v as f64).max(0.0))) as f32)
+            .collect();
+        Cube::from_vec(y.width, y.height, 1, data)
+    }
+}
+
+/// g_p = mean(flat − dark)/(flat_p − dark_p): the factor `calibration::calibrate` multiplies
+/// pixel p's raw signal by.
+fn flat_gains(df: &DarkFlat, y: &Cube) -> Result<Vec<f64>> {
+    y.check_same_shape(&df.dark, "noise weights: frame against dark frame")?;
+    y.check_same_shape(&df.flat, "noise weights: frame against flat frame")?;
+    let resp: Vec<f64> = df
+        .flat
+        .data
+        .iter()
+        .zip(&df.dark.data)
+        .map(|(&f, &d)| f as f64 - d as f64)
+        .collect();
+    if let Some(i) = resp.iter().position(|&r| r.is_nan() || r <= 0.0) {
+        return Err(Error::Numerical(format!(
+            "noise weights: flat − dark = {} DN at pixel {i}; the flat must be brighter",
+            resp[i]
+        )));
+    }
+    let mean = resp.iter().sum::<f64>() / resp.len() as f64;
+    Ok(resp.iter().map(|r| mean / r).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two pixels by hand: K = 0.5 DN/e⁻, σ = 2 DN, dark (10, 10), flat (110, 60) → responses
+    /// (100, 50), mean 75, gains (0.75, 1.5). y = (30, −4): var = 0.75²·4 + 0.75·0.5·30 =
+    /// 2.25 + 11.25 = 13.5 and 1.5²·4 + 0 = 9 (a negative signal adds no shot noise).
+    #[test]
+    fn weights_of_a_case_computed_by_hand() {
+        let m = NoiseModel {
+            gain_dn_per_e: 0.5,
+            dark_noise_dn: 2.0,
+        };
+        let df = DarkFlat {
+            dark: Cube::from_vec(2, 1, 1, vec![10.0, 10.0]).unwrap(),
+            flat: Cube::from_vec(2, 1, 1, vec![110.0, 60.0]).unwrap(),
+        };
+        let y = Cube::from_vec(2, 1, 1, vec![30.0, -4.0]).unwrap();
+        let w = m.weights(&y, Some(&df)).unwrap();
+        assert!((w.data[0] - 1.0 / 13.5).abs() < 1e-7, "{:?}", w.data);
+        assert!((w.data[1] - 1.0 / 9.0).abs() < 1e-7, "{:?}", w.data);
+        // Without dark/flat: var = σ² + K·y.
+        let w = m.weights(&y, None).unwrap();
+        assert!((w.data[0] - 1.0 / 19.0).abs() < 1e-7 && (w.data[1] - 0.25).abs() < 1e-7);
+    }
+
+    /// The weights match the sample variance of simulated Poisson + Gaussian frames pushed
+    /// through the same dark/flat correction (a property of the derivation, not of the code).
+    #[test]
+    fn weights_match_the_sample_variance_of_corrected_frames() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal, Poisson};
+        let (k, sd) = (0.25, 0.9);
+        let (electrons, dark_dn, resp) = (4000.0, 100.0f64, [800.0f64, 400.0]);
+        let df = DarkFlat {
+            dark: Cube::from_vec(2, 1, 1, vec![dark_dn as f32; 2]).unwrap(),
+            flat: Cube::from_vec(2, 1, 1, resp.iter().map(|r| (r + dark_dn) as f32).collect())
+                .unwrap(),
+        };
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let read = Normal::new(0.0, sd).unwrap();
+        let n = 20000;
+        let mean_resp = (resp[0] + resp[1]) / 2.0;
+        for (p, r) in resp.iter().enumerate() {
+            // The pixel's quantum efficiency × light scales with its flat response.
+            let mu = electrons * r / mean_resp;
+            let pois = Poisson::new(mu).unwrap();
+            let ys: Vec<f64> = (0..n)
+                .map(|_| {
+                    let raw = k * pois.sample(&mut rng) + read.sample(&mut rng) + dark_dn;
+                    (raw - dark_dn) / r * mean_resp
+                })
+                .collect();
+            let mean = ys.iter().sum::<f64>() / n as f64;
+            let var = ys.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+            let mut y = Cube::zeros(2, 1, 1);
+            y.data[p] = mean as f32;
+            let w = NoiseModel {
+                gain_dn_per_e: k,
+                dark_noise_dn: sd,
+            }
+            .weights(&y, Some(&df))
+            .unwrap();
+            let predicted = 1.0 / w.data[p] as f64;
+            // 20000 samples: the sample variance is within ±3 % (about 3 σ) of the truth.
+            assert!(
+                (var / predicted - 1.0).abs() < 0.03,
+                "pixel {p}: sample {var:.3} against {predicted:.3}"
+            );
+        }
+    }
+
+    #[test]
+    fn bad_models_are_refused() {
+        let m = NoiseModel {
+            gain_dn_per_e: 0.5,
+            dark_noise_dn: 0.0,
+        };
+        let e = m.weights(&Cube::zeros(2, 1, 1), None).unwrap_err();
+        assert!(e.to_string().contains("dark_noise_dn = 0"), "{e}");
+    }
+}
