@@ -1,7 +1,7 @@
 //! The forward model's multiplex on the GPU (shaders/multiplex.wgsl): y = Σ_k z_k ⊙ s̃_k per
-//! pixel, the twin's `multiplex::multiplex` in the same order of summation. The patterns s̃ are
-//! uploaded once per rig and stay on the GPU; a frame is one upload of z, one kernel and one
-//! read-back of y.
+//! pixel, the twin's `multiplex::multiplex` in the same order of summation. Buffers are made
+//! once per size; a frame is one upload of z and s̃ (or of z alone, the patterns kept), one
+//! kernel and one read-back of y.
 
 use crate::context::{linear_groups, GpuContext, Launch};
 use crate::error::{GpuError, Result};
@@ -29,10 +29,9 @@ pub struct GpuMultiplex {
 }
 
 impl GpuMultiplex {
-    /// The kernel for `planes` images of w × h, with the patterns `s` (the same shape) uploaded.
-    pub fn new(ctx: &GpuContext, s: &Cube) -> Result<GpuMultiplex> {
-        let (w, h, planes) = (s.width, s.height, s.planes);
-        if s.pixels() == 0 || planes == 0 {
+    /// The kernel for `planes` images of w × h.
+    pub fn new(ctx: &GpuContext, (w, h, planes): (usize, usize, usize)) -> Result<GpuMultiplex> {
+        if w * h == 0 || planes == 0 {
             return Err(GpuError::Shape(format!(
                 "multiplex: patterns of {w}×{h}×{planes}"
             )));
@@ -60,7 +59,7 @@ impl GpuMultiplex {
             &[&z, &patterns, &y, &uniform],
             linear_groups(npx, 256),
         );
-        let m = GpuMultiplex {
+        Ok(GpuMultiplex {
             w,
             h,
             planes,
@@ -69,12 +68,10 @@ impl GpuMultiplex {
             s: patterns,
             y,
             launch,
-        };
-        m.upload_patterns(ctx, s)?;
-        Ok(m)
+        })
     }
 
-    /// Replace the patterns s̃ (the same shape).
+    /// Upload the patterns s̃ (this kernel's shape); they stay until replaced.
     pub fn upload_patterns(&self, ctx: &GpuContext, s: &Cube) -> Result<()> {
         self.check(s, "patterns")?;
         ctx.queue
@@ -109,7 +106,7 @@ impl GpuMultiplex {
     }
 
     /// y of `z` against the uploaded patterns: one upload, one kernel, one read-back.
-    pub fn run(&self, ctx: &GpuContext, z: &Cube) -> Result<Cube> {
+    pub fn run_with_patterns(&self, ctx: &GpuContext, z: &Cube) -> Result<Cube> {
         self.check(z, "images")?;
         ctx.queue
             .write_buffer(&self.z, 0, bytemuck::cast_slice(&z.data));
@@ -120,5 +117,16 @@ impl GpuMultiplex {
         let mut y = Cube::zeros(self.w, self.h, 1);
         ctx.read_into(&self.staging, &mut y.data)?;
         Ok(y)
+    }
+
+    /// y of `z` against `s`: both uploaded, one kernel, one read-back.
+    pub fn run(&self, ctx: &GpuContext, z: &Cube, s: &Cube) -> Result<Cube> {
+        self.upload_patterns(ctx, s)?;
+        self.run_with_patterns(ctx, z)
+    }
+
+    /// (w, h, planes) of the images this kernel takes.
+    pub fn shape(&self) -> (usize, usize, usize) {
+        (self.w, self.h, self.planes)
     }
 }
