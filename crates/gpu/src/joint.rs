@@ -67,16 +67,7 @@ pub struct GpuJoint {
     cube: GpuMix,
     clip: Launch,
     channels: GpuMix,
-    /// ω's plane in `tab`.
-    tab: wgpu::Buffer,
-    /// α | ᾱ | qx | qy.
-    state: wgpu::Buffer,
-    /// r (padded bands) | active.
-    r: wgpu::Buffer,
-    scalars: wgpu::Buffer,
-    objective: wgpu::Buffer,
-    extremes: wgpu::Buffer,
-    counter: wgpu::Buffer,
+    b: Buffers,
     /// The objective list, the scalars' header, the extremes and the counter, for the host.
     staging: wgpu::Buffer,
 }
@@ -94,103 +85,78 @@ impl GpuJoint {
         gains: &[f64],
     ) -> Result<GpuJoint> {
         let t = joint.tables();
-        let (j, nbp, npx) = (t.basis_len, t.padded_bands, t.width * t.height);
-        let bands = t.basis.nrows();
-        if gains.len() != bands {
+        let (j, npx) = (t.basis_len, t.width * t.height);
+        if gains.len() != t.basis.nrows() {
             return Err(GpuError::Shape(format!(
-                "{} output gains for {bands} bands",
-                gains.len()
+                "{} output gains for {} bands",
+                gains.len(),
+                t.basis.nrows()
             )));
         }
-        let params = Params {
-            w: t.width as u32,
-            h: t.height as u32,
-            npx: npx as u32,
-            bands: bands as u32,
-            lambda_per_y: (t.config.tv_weight * t.mean_a_norm) as f32,
-            ratio: t.config.step_ratio as f32,
-            step: (t.step_product.sqrt() / t.operator_norm) as f32,
-            _pad: 0.0,
-        };
-        let uniform = ctx.uniform("joint params", &params);
-        let module = ctx.module("joint", &source(j, nbp));
-        let rig = ctx.storage_init("joint rig tables", &rig_tables(joint));
-        let plane = (npx * 4) as u64;
-        let tab = ctx.storage("joint prox tables", (j as u64 + 4) * plane);
-        let state = ctx.storage("joint state", 4 * j as u64 * plane);
-        let r = ctx.storage("joint constraint dual", (nbp as u64 + 1) * plane);
-        let cost = ctx.storage("joint pixel costs", plane);
-        let scalars = ctx.storage("joint scalars", ((SCALARS + j * j) * 4) as u64);
-        let objective = ctx.storage("joint objective", (4 * (t.config.iterations + 2)) as u64);
-        let extremes = ctx.storage("joint cube extremes", 8);
-        let counter = ctx.storage("joint non-finite", 4);
-        let partials = ctx.storage(
-            "joint partials",
-            (gap::count(linear_groups(npx * j, WORKGROUP)) * 4) as u64,
-        );
+        let b = Buffers::new(ctx, joint);
+        let uniform = ctx.uniform("joint params", &params(joint));
+        let module = ctx.module("joint", &source(j, t.padded_bands));
         let pixels = linear_groups(npx, WORKGROUP);
         let launch = |entry, bound: &[(u32, &wgpu::Buffer)], groups| {
-            let mut all = vec![(0, &uniform)];
-            all.extend_from_slice(bound);
+            let all = joined(&[(0, &uniform)], bound);
             Launch::bound(ctx, &module, entry, &all, groups)
         };
-        let common = [(1, &rig), (2, frame), (3, &scalars), (4, &tab), (5, &state)];
+        let common = [
+            (1, &b.rig),
+            (2, frame),
+            (3, &b.scalars),
+            (4, &b.tab),
+            (5, &b.state),
+        ];
         let gm = gap::module(ctx);
-        let n = npx as f64;
-        let mut start = Vec::new();
-        start.extend(gap::abs_sum(
-            ctx,
-            &gm,
-            frame,
-            (npx, 1),
-            1.0 / n,
-            &partials,
-            &scalars,
-        ));
-        start.extend(gap::abs_sum(
-            ctx,
-            &gm,
-            &state,
-            (npx, j),
-            1.0 / (n * j as f64),
-            &partials,
-            &scalars,
-        ));
-        start.push(launch("setup", &[(1, &rig), (3, &scalars)], [1, 1, 1]));
-        start.push(launch("tables", &joined(&common, &[(6, &r)]), pixels));
-        let rows = |m: &nalgebra::DMatrix<f64>, g: &[f64]| -> Vec<Vec<f64>> {
-            m.row_iter()
-                .zip(g)
-                .map(|(row, &g)| row.iter().map(|v| v * g).collect())
-                .collect()
+        let mean = |input, planes: usize| {
+            let scale = 1.0 / (npx * planes) as f64;
+            gap::abs_sum(
+                ctx,
+                &gm,
+                input,
+                (npx, planes),
+                scale,
+                &b.partials,
+                &b.scalars,
+            )
         };
+        let mut start: Vec<Launch> = mean(frame, 1)
+            .into_iter()
+            .chain(mean(&b.state, j))
+            .collect();
+        start.push(launch("setup", &[(1, &b.rig), (3, &b.scalars)], [1, 1, 1]));
+        start.push(launch("tables", &joined(&common, &[(6, &b.r)]), pixels));
         let ones = vec![1.0; t.system.nrows()];
         let joint = GpuJoint {
             iterations: t.config.iterations,
             j,
-            nbp,
+            nbp: t.padded_bands,
             npx,
             start,
-            dual: launch("dual", &joined(&common, &[(6, &r), (7, &cost)]), pixels),
-            cost_sum: gap::abs_sum(ctx, &gm, &cost, (npx, 1), 1.0, &partials, &objective),
+            dual: launch("dual", &joined(&common, &[(6, &b.r), (7, &b.cost)]), pixels),
+            cost_sum: gap::abs_sum(ctx, &gm, &b.cost, (npx, 1), 1.0, &b.partials, &b.objective),
             primal: launch(
                 "primal",
-                &[(1, &rig), (3, &scalars), (4, &tab), (5, &state), (6, &r)],
+                &[
+                    (1, &b.rig),
+                    (3, &b.scalars),
+                    (4, &b.tab),
+                    (5, &b.state),
+                    (6, &b.r),
+                ],
                 pixels,
             ),
-            cost: launch("objective", &joined(&common, &[(7, &cost)]), pixels),
-            non_finite: gap::non_finite(ctx, &gm, &state, (npx, j), &counter),
-            cube: GpuMix::into(ctx, &rows(t.basis, gains), &state, npx, cube)?,
-            clip: launch("clip", &[(8, cube), (9, &extremes)], pixels),
-            channels: GpuMix::new(ctx, &rows(t.system, &ones), &state, npx)?,
-            staging: ctx.readback("joint staging", objective.size() + 4 * SCALARS as u64 + 12),
-            tab,
-            state,
-            r,
-            scalars,
-            objective,
-            extremes,
-            counter,
+            cost: launch("objective", &joined(&common, &[(7, &b.cost)]), pixels),
+            non_finite: gap::non_finite(ctx, &gm, &b.state, (npx, j), &b.counter),
+            cube: GpuMix::into(ctx, &scaled_rows(t.basis, gains), &b.state, npx, cube)?,
+            clip: launch("clip", &[(8, cube), (9, &b.extremes)], pixels),
+            channels: GpuMix::new(ctx, &scaled_rows(t.system, &ones), &b.state, npx)?,
+            staging: ctx.readback(
+                "joint staging",
+                b.objective.size() + 4 * SCALARS as u64 + 12,
+            ),
+            b,
         };
         joint.write_weights(ctx, &vec![1.0; npx]);
         Ok(joint)
@@ -217,12 +183,12 @@ impl GpuJoint {
     fn write_weights(&self, ctx: &GpuContext, omega: &[f32]) {
         let at = ((self.j + 3) * self.npx * 4) as u64;
         ctx.queue
-            .write_buffer(&self.tab, at, bytemuck::cast_slice(omega));
+            .write_buffer(&self.b.tab, at, bytemuck::cast_slice(omega));
     }
 
     /// The state buffer: its first J planes are α (the seed goes there before `encode`).
     pub fn alpha_buffer(&self) -> &wgpu::Buffer {
-        &self.state
+        &self.b.state
     }
 
     /// The channels x = Fα (C planes) after `encode`.
@@ -240,10 +206,10 @@ impl GpuJoint {
     /// Record the start of a run: the lists cleared, λ, τ, σ, M, the tables, ᾱ = α, q = r = 0.
     pub fn encode_start(&self, enc: &mut wgpu::CommandEncoder) {
         for b in [
-            &self.scalars,
-            &self.objective,
-            &self.extremes,
-            &self.counter,
+            &self.b.scalars,
+            &self.b.objective,
+            &self.b.extremes,
+            &self.b.counter,
         ] {
             enc.clear_buffer(b, 0, None);
         }
@@ -289,12 +255,12 @@ impl GpuJoint {
             self.clip.record(&mut cp);
             self.channels.record(&mut cp);
         }
-        let o = self.objective.size();
+        let o = self.b.objective.size();
         let s = 4 * SCALARS as u64;
-        enc.copy_buffer_to_buffer(&self.objective, 0, &self.staging, 0, o);
-        enc.copy_buffer_to_buffer(&self.scalars, 0, &self.staging, o, s);
-        enc.copy_buffer_to_buffer(&self.extremes, 0, &self.staging, o + s, 8);
-        enc.copy_buffer_to_buffer(&self.counter, 0, &self.staging, o + s + 8, 4);
+        enc.copy_buffer_to_buffer(&self.b.objective, 0, &self.staging, 0, o);
+        enc.copy_buffer_to_buffer(&self.b.scalars, 0, &self.staging, o, s);
+        enc.copy_buffer_to_buffer(&self.b.extremes, 0, &self.staging, o + s, 8);
+        enc.copy_buffer_to_buffer(&self.b.counter, 0, &self.staging, o + s + 8, 4);
     }
 
     /// After the submission that held `encode` (or `encode_finish`): the objective at the seed
@@ -327,9 +293,9 @@ impl GpuJoint {
     /// The iterate, the duals and the scalars read back (one round trip each; for tests).
     pub fn state(&self, ctx: &GpuContext) -> Result<JointGpuState> {
         let (j, n) = (self.j, self.npx);
-        let st: Vec<f32> = ctx.read(&self.state, 4 * j * n)?;
-        let mut r: Vec<f32> = ctx.read(&self.r, (self.nbp + 1) * n)?;
-        let sc: Vec<f32> = ctx.read(&self.scalars, SCALARS)?;
+        let st: Vec<f32> = ctx.read(&self.b.state, 4 * j * n)?;
+        let mut r: Vec<f32> = ctx.read(&self.b.r, (self.nbp + 1) * n)?;
+        let sc: Vec<f32> = ctx.read(&self.b.scalars, SCALARS)?;
         let active = r.split_off(self.nbp * n);
         let part = |k: usize| st[k * j * n..(k + 1) * j * n].to_vec();
         Ok(JointGpuState {
@@ -344,6 +310,68 @@ impl GpuJoint {
             sigma: sc[5],
         })
     }
+}
+
+/// The buffers of one rig's run: shaders/joint.wgsl's bindings and the sums' partials.
+struct Buffers {
+    rig: wgpu::Buffer,
+    /// m | t | c | k | ω.
+    tab: wgpu::Buffer,
+    /// α | ᾱ | qx | qy.
+    state: wgpu::Buffer,
+    /// r (padded bands) | active.
+    r: wgpu::Buffer,
+    cost: wgpu::Buffer,
+    scalars: wgpu::Buffer,
+    objective: wgpu::Buffer,
+    extremes: wgpu::Buffer,
+    counter: wgpu::Buffer,
+    partials: wgpu::Buffer,
+}
+
+impl Buffers {
+    /// Every buffer of `joint`'s run, zeroed but for the rig's tables.
+    fn new(ctx: &GpuContext, joint: &Joint) -> Buffers {
+        let t = joint.tables();
+        let (j, npx) = (t.basis_len as u64, t.width * t.height);
+        let plane = (npx * 4) as u64;
+        let groups = gap::count(linear_groups(npx * t.basis_len, WORKGROUP));
+        Buffers {
+            rig: ctx.storage_init("joint rig tables", &rig_tables(joint)),
+            tab: ctx.storage("joint prox tables", (j + 4) * plane),
+            state: ctx.storage("joint state", 4 * j * plane),
+            r: ctx.storage("joint constraint dual", (t.padded_bands as u64 + 1) * plane),
+            cost: ctx.storage("joint pixel costs", plane),
+            scalars: ctx.storage("joint scalars", 4 * (SCALARS as u64 + j * j)),
+            objective: ctx.storage("joint objective", 4 * (t.config.iterations as u64 + 2)),
+            extremes: ctx.storage("joint cube extremes", 8),
+            counter: ctx.storage("joint non-finite", 4),
+            partials: ctx.storage("joint partials", 4 * groups as u64),
+        }
+    }
+}
+
+/// shaders/joint.wgsl's `Params` for `joint`.
+fn params(joint: &Joint) -> Params {
+    let t = joint.tables();
+    Params {
+        w: t.width as u32,
+        h: t.height as u32,
+        npx: (t.width * t.height) as u32,
+        bands: t.basis.nrows() as u32,
+        lambda_per_y: (t.config.tv_weight * t.mean_a_norm) as f32,
+        ratio: t.config.step_ratio as f32,
+        step: (t.step_product.sqrt() / t.operator_norm) as f32,
+        _pad: 0.0,
+    }
+}
+
+/// The rows of `m` each times its gain (the mixing matrices of `GpuMix`).
+fn scaled_rows(m: &nalgebra::DMatrix<f64>, gains: &[f64]) -> Vec<Vec<f64>> {
+    m.row_iter()
+        .zip(gains)
+        .map(|(row, &g)| row.iter().map(|v| v * g).collect())
+        .collect()
 }
 
 /// The bindings `a` then `b`.

@@ -21,6 +21,11 @@
 //!   grow: ≤ 30 steps × ~1e-6, times √(1/(1 − √(τσ)‖K‖)) ≈ 10 for the L2 norm against M's.
 //!
 //! A swapped axis, a wrong lane, a dropped constraint or an off-by-one pixel gives 1e-2 or more.
+//!
+//! By hand: with η = 0 a constant α with Bα > 0 that fits y = aᵀα exactly is a fixed point (its
+//! gradient is 0, so q stays 0; r stays 0; the prox of v = α returns α since aᵀα = y), with
+//! objective 0. Property: y and α₀ scaled by 2^k scale λ and mean|α₀| alike, so τ and σ are
+//! unchanged and every iterate scales by 2^k, bit for bit (products by powers of two are exact).
 
 mod common;
 
@@ -72,13 +77,27 @@ fn basis_and_system() -> (DMatrix<f64>, DMatrix<f64>) {
 }
 
 fn solver(iterations: usize) -> Joint {
+    solver_with(iterations, 1.0)
+}
+
+/// The solver with smoothness weight η.
+fn solver_with(iterations: usize, eta: f64) -> Joint {
     let (b, f) = basis_and_system();
     let cfg = JointConfig {
         iterations,
         tv_weight: 0.05,
         step_ratio: 1.0,
     };
-    Joint::new(&patterns(), &f, &b, 1.0, &cfg, "t.toml").unwrap()
+    Joint::new(&patterns(), &f, &b, eta, &cfg, "t.toml").unwrap()
+}
+
+/// y = aᵀα per pixel for α planes.
+fn frame_of(joint: &Joint, alpha: &Cube) -> Cube {
+    let (n, a) = (W * H, joint.tables().a);
+    let y = (0..n)
+        .map(|p| (0..J).map(|j| a[p * J + j] * alpha.data[j * n + p]).sum())
+        .collect();
+    Cube::from_vec(W, H, 1, y).unwrap()
 }
 
 /// A piecewise-constant α (four regions), its frame y = aᵀα per pixel, and a seed: α plus
@@ -94,16 +113,12 @@ fn problem(joint: &Joint) -> (Cube, Cube) {
             alpha.data[j * n + p] = [1.0, 0.3, -0.2, 0.1][j] * (1.0 + 0.5 * region as f32);
         }
     }
-    let a = joint.tables().a;
-    let y = (0..n)
-        .map(|p| (0..J).map(|j| a[p * J + j] * alpha.data[j * n + p]).sum())
-        .collect();
     let mut seed = alpha.clone();
     seed.data
         .iter_mut()
         .zip(&noise)
         .for_each(|(v, e)| *v += 0.8 * e);
-    (Cube::from_vec(W, H, 1, y).unwrap(), seed)
+    (frame_of(joint, &alpha), seed)
 }
 
 /// The GPU solver for `joint` on `frame` with the seed uploaded, and its cube buffer.
@@ -294,4 +309,65 @@ fn bad_weights_are_refused_and_a_non_finite_seed_is_an_error() {
     submit(&ctx, |enc| g.encode(enc));
     let e = g.stats(&ctx).unwrap_err().to_string();
     assert!(e.contains("non-finite"), "{e}");
+}
+
+#[test]
+fn an_exact_constant_fit_is_a_fixed_point_with_zero_objective() {
+    let Some(ctx) = common::context() else { return };
+    let joint = solver_with(20, 0.0);
+    let mut alpha = Cube::zeros(W, H, J);
+    for (plane, v) in alpha.planes_mut().zip([2.0f32, 0.2, -0.1, 0.05]) {
+        plane.fill(v);
+    }
+    let frame = frame_of(&joint, &alpha);
+    let (g, _) = gpu_solver(&ctx, &joint, &frame, &alpha, &[1.0; BANDS]);
+    submit(&ctx, |enc| g.encode(enc));
+    let stats = g.stats(&ctx).unwrap();
+    let gpu = g.state(&ctx).unwrap();
+    let e = rel(&gpu.alpha, &alpha.data);
+    let energy: f64 = frame.data.iter().map(|&v| 0.5 * (v as f64).powi(2)).sum();
+    let worst = stats.objective.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    eprintln!("fixed point: α moved by {e:.2e} (relative L2), objective ≤ {worst:.2e} of ½Σy² = {energy:.3e}");
+    assert!(e < 1e-5, "α moved by {e:.2e}");
+    assert!(worst < 1e-6 * energy, "objective {worst:e}");
+    // The constraint never acts; q holds only the rounding of α's flat field (ulps).
+    assert!(gpu.active.iter().all(|&a| a == 0.0));
+    let q = gpu
+        .qx
+        .iter()
+        .chain(&gpu.qy)
+        .fold(0.0f32, |m, v| m.max(v.abs()));
+    assert!(q < 1e-5 * gpu.lambda, "max |q| = {q:e}, λ = {}", gpu.lambda);
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::test_runner::Config {
+        cases: 8,
+        failure_persistence: None,
+        ..Default::default()
+    })]
+    /// Scaling y and α₀ by 2^k scales every iterate by 2^k exactly and leaves τ, σ unchanged.
+    #[test]
+    fn scaling_the_frame_and_seed_by_a_power_of_two_scales_alpha_exactly(k in -6i32..6, seed in 0u64..1000) {
+        let Some(ctx) = common::context() else { return Ok(()) };
+        let joint = solver(5);
+        let (frame, mut alpha0) = problem(&joint);
+        alpha0.data.iter_mut().zip(common::noise(W * H * J, seed)).for_each(|(v, e)| *v += 0.1 * e);
+        let c = 2f32.powi(k);
+        let scaled = |x: &Cube| {
+            let mut y = x.clone();
+            y.data.iter_mut().for_each(|v| *v *= c);
+            y
+        };
+        let run = |y: &Cube, a0: &Cube| {
+            let (g, _) = gpu_solver(&ctx, &joint, y, a0, &[1.0; BANDS]);
+            submit(&ctx, |enc| g.encode(enc));
+            g.stats(&ctx).unwrap();
+            g.state(&ctx).unwrap()
+        };
+        let (one, two) = (run(&frame, &alpha0), run(&scaled(&frame), &scaled(&alpha0)));
+        proptest::prop_assert_eq!((one.tau, one.sigma), (two.tau, two.sigma));
+        let want: Vec<f32> = one.alpha.iter().map(|v| v * c).collect();
+        proptest::prop_assert_eq!(two.alpha, want);
+    }
 }
