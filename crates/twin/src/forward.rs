@@ -163,7 +163,11 @@ impl Pipeline {
                 device: for_device(
                     exp.compute.device,
                     (rig.width, rig.height, rig.imaged_carriers.len()),
-                )?,
+                )
+                .map_err(|e| {
+                    let device = format!("{:?}", exp.compute.device).to_lowercase();
+                    e.within(&exp.file, "compute.device", device)
+                })?,
             },
             sensor: match &exp.rig.sensor {
                 Some(c) => Some(SensorStage {
