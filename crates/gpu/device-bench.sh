@@ -19,7 +19,7 @@ stage() {
   cargo build --release --features gpu --bin specmux
   strip -o "$dir/specmux" "$tgt/release/specmux"
   gzip -f9 "$dir/specmux"
-  for t in fft demux unmix gap reconstructor realtime; do
+  for t in fft demux unmix gap joint reconstructor realtime; do
     local bin
     bin=$(ls -t "$tgt"/release/deps/"$t"-* | grep -v '\.d$' | head -1)
     strip -o "$dir/$t" "$bin"
@@ -33,10 +33,10 @@ run() {
   mkdir -p "$out"
   export SPECMUX_SPECTRA=${SPECMUX_SPECTRA:-$PWD/spectra}
   nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.mem --format=csv | tee "$out/gpu.txt" || true
-  for t in fft demux unmix gap reconstructor realtime specmux; do
+  for t in fft demux unmix gap joint reconstructor realtime specmux; do
     gunzip -c "$dir/$t.gz" >"/tmp/$t" && chmod +x "/tmp/$t"
   done
-  for t in fft demux unmix gap reconstructor; do
+  for t in fft demux unmix gap joint reconstructor; do
     "/tmp/$t" --nocapture --test-threads 1 >"$out/test-$t.log" 2>&1 || echo "TEST $t FAILED"
     grep -E "adapter|test result" "$out/test-$t.log" | sort -u
   done

@@ -819,6 +819,67 @@ impl Joint {
     pub fn operator_norm(&self) -> f64 {
         self.norm_k
     }
+
+    /// The per-rig tables a backend mirrors to run these iterations (see [`JointTables`]).
+    pub fn tables(&self) -> JointTables<'_> {
+        JointTables {
+            width: self.w,
+            height: self.h,
+            basis_len: self.j,
+            padded_bands: self.nbp,
+            config: &self.cfg,
+            a: &self.a,
+            basis_columns: &self.bcol,
+            column_range: &self.col_range,
+            smoothness: &self.eq,
+            operator_norm: self.norm_k,
+            mean_a_norm: self.mean_a_norm,
+            step_product: STEP_PRODUCT,
+            system: &self.system,
+            basis: &self.basis,
+        }
+    }
+}
+
+/// Read-only view of a `Joint`'s tables, for a backend (specmux-gpu) that runs the same
+/// iterations: every value `start` and `step` read besides the frame, the seed and ω.
+pub struct JointTables<'a> {
+    pub width: usize,
+    pub height: usize,
+    /// J.
+    pub basis_len: usize,
+    /// Bands padded to whole lanes (the length of each column of `basis_columns`).
+    pub padded_bands: usize,
+    pub config: &'a JointConfig,
+    /// a_p = Fᵀ S'(p), pixel-major (J per pixel).
+    pub a: &'a [f32],
+    /// βB by columns, each padded with zeros to `padded_bands`.
+    pub basis_columns: &'a [f32],
+    /// (min_k, max_k) of each column of βB (`surely_feasible`'s bound).
+    pub column_range: &'a [(f32, f32)],
+    /// η'Q (J × J).
+    pub smoothness: &'a DMatrix<f64>,
+    /// The bound on ‖K‖ the steps use.
+    pub operator_norm: f64,
+    /// mean‖a_p‖ (λ's scale).
+    pub mean_a_norm: f64,
+    /// τσ‖K‖².
+    pub step_product: f64,
+    pub system: &'a DMatrix<f64>,
+    pub basis: &'a DMatrix<f64>,
+}
+
+impl JointState {
+    /// The dual variables and the active flags, pixel-major: (qx, qy, r, active), r padded to
+    /// `JointTables::padded_bands` per pixel (for checking another backend's steps).
+    pub fn duals(&self) -> (&[f32], &[f32], &[f32], &[u8]) {
+        (&self.qx, &self.qy, &self.r, &self.active)
+    }
+
+    /// ᾱ = 2α⁺ − α of the last step, pixel-major.
+    pub fn extrapolated(&self) -> &[f32] {
+        &self.bar
+    }
 }
 
 /// Largest J the per-pixel kernels handle on the stack.

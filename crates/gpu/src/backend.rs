@@ -15,7 +15,7 @@ pub fn open(device: ComputeDevice) -> Result<Option<GpuContext>> {
         ComputeDevice::Auto => match GpuContext::new() {
             Ok(ctx) => Ok(Some(ctx)),
             Err(e @ (GpuError::NoAdapter(_) | GpuError::Device(_))) => {
-                eprintln!("compute device auto: {e}; reconstructing on the CPU");
+                eprintln!("compute device auto: {e}; staying on the CPU");
                 Ok(None)
             }
             Err(e) => Err(e),

@@ -91,7 +91,7 @@ impl GpuGap {
             _pad: 0,
         };
         let uniform = ctx.uniform("gap params", &params);
-        let module = ctx.module("gap", include_str!("shaders/gap.wgsl"));
+        let module = module(ctx);
         let pixels = linear_groups(npx, WORKGROUP);
         let values = linear_groups(npx * planes, WORKGROUP);
         let patterns = ctx.storage_init("gap patterns", t.patterns);
@@ -101,17 +101,6 @@ impl GpuGap {
         let residuals = ctx.storage("gap residuals", (4 * (cfg.iterations + 1)) as u64);
         let lambda = ctx.storage("gap-tv lambda", 8);
         let counter = ctx.storage("gap non-finite", 4);
-        let finish = |partials_of: [u32; 3], scale: f64, out: &wgpu::Buffer| {
-            let p = ctx.uniform(
-                "gap finish",
-                &Finish {
-                    partials: count(partials_of) as u32,
-                    scale: scale as f32,
-                    _pad: [0; 2],
-                },
-            );
-            Launch::new(ctx, &module, "finish", &[&partials, out, &p], [1, 1, 1])
-        };
         let project = [
             Launch::new(
                 ctx,
@@ -128,20 +117,26 @@ impl GpuGap {
                 ],
                 pixels,
             ),
-            finish(pixels, 1.0 / npx as f64, &residuals),
+            finish(
+                ctx,
+                &module,
+                &partials,
+                pixels,
+                1.0 / npx as f64,
+                &residuals,
+            ),
         ];
         let denoiser = match cfg.method {
             Method::GapTv => Denoiser::Tv {
-                lambda: [
-                    Launch::new(
-                        ctx,
-                        &module,
-                        "abs_sum",
-                        &[estimate, &partials, &uniform],
-                        values,
-                    ),
-                    finish(values, cfg.tv_weight / (npx * planes) as f64, &lambda),
-                ],
+                lambda: abs_sum(
+                    ctx,
+                    &module,
+                    estimate,
+                    (npx, planes),
+                    cfg.tv_weight / (npx * planes) as f64,
+                    &partials,
+                    &lambda,
+                ),
                 tv: GpuTv::new(
                     ctx,
                     estimate,
@@ -179,13 +174,7 @@ impl GpuGap {
                 }
             }
         };
-        let non_finite = Launch::new(
-            ctx,
-            &module,
-            "non_finite",
-            &[estimate, &counter, &uniform],
-            values,
-        );
+        let non_finite = non_finite(ctx, &module, estimate, (npx, planes), &counter);
         Ok(GpuGap {
             iterations: cfg.iterations,
             frame: frame.clone(),
@@ -273,6 +262,81 @@ impl GpuGap {
 }
 
 /// Workgroups in a dispatch.
-fn count(g: [u32; 3]) -> usize {
+pub(crate) fn count(g: [u32; 3]) -> usize {
     g.iter().map(|&v| v as usize).product()
+}
+
+/// shaders/gap.wgsl compiled (its sums and the non-finite count serve the joint method too).
+pub(crate) fn module(ctx: &GpuContext) -> wgpu::ShaderModule {
+    ctx.module("gap", include_str!("shaders/gap.wgsl"))
+}
+
+/// `finish`: scale · Σ of the `partials` of a dispatch of `groups`, appended to the list `out`.
+pub(crate) fn finish(
+    ctx: &GpuContext,
+    module: &wgpu::ShaderModule,
+    partials: &wgpu::Buffer,
+    groups: [u32; 3],
+    scale: f64,
+    out: &wgpu::Buffer,
+) -> Launch {
+    let p = ctx.uniform(
+        "gap finish",
+        &Finish {
+            partials: count(groups) as u32,
+            scale: scale as f32,
+            _pad: [0; 2],
+        },
+    );
+    Launch::new(ctx, module, "finish", &[partials, out, &p], [1, 1, 1])
+}
+
+/// The `Params` uniform of `planes` planes of `npx` values (not accelerated).
+fn sizes(ctx: &GpuContext, (npx, planes): (usize, usize)) -> wgpu::Buffer {
+    let params = Params {
+        npx: npx as u32,
+        planes: planes as u32,
+        accelerate: 0,
+        _pad: 0,
+    };
+    ctx.uniform("gap sizes", &params)
+}
+
+/// `abs_sum` then `finish`: scale · Σ|v| over `planes` planes of `npx` values of `input`
+/// appended to the list `out` (`partials` holds a value per workgroup of 256).
+pub(crate) fn abs_sum(
+    ctx: &GpuContext,
+    module: &wgpu::ShaderModule,
+    input: &wgpu::Buffer,
+    size: (usize, usize),
+    scale: f64,
+    partials: &wgpu::Buffer,
+    out: &wgpu::Buffer,
+) -> [Launch; 2] {
+    let values = linear_groups(size.0 * size.1, WORKGROUP);
+    let uniform = sizes(ctx, size);
+    [
+        Launch::new(ctx, module, "abs_sum", &[input, partials, &uniform], values),
+        finish(ctx, module, partials, values, scale, out),
+    ]
+}
+
+/// `non_finite`: the count of NaN and infinite values among `planes` planes of `npx` values of
+/// `input`, added to word 0 of `counter`.
+pub(crate) fn non_finite(
+    ctx: &GpuContext,
+    module: &wgpu::ShaderModule,
+    input: &wgpu::Buffer,
+    size: (usize, usize),
+    counter: &wgpu::Buffer,
+) -> Launch {
+    let values = linear_groups(size.0 * size.1, WORKGROUP);
+    let uniform = sizes(ctx, size);
+    Launch::new(
+        ctx,
+        module,
+        "non_finite",
+        &[input, counter, &uniform],
+        values,
+    )
 }

@@ -1,9 +1,9 @@
 //! specmux-gpu: the reconstruction core on a GPU through wgpu — a batched 2-D FFT in WGSL,
 //! Fourier demultiplexing, GAP and GAP-TV de-aliasing (wavelet group shrinkage with an exact
-//! GPU selection of its threshold, TV denoising) and the exact per-pixel non-negative
-//! unmixing — giving the CPU's answers within stated f32 tolerances (docs/gpu.md). Data stays
-//! on the GPU from the uploaded frame to the cube; buffers are made once per rig and reused
-//! per frame.
+//! GPU selection of its threshold, TV denoising), the exact per-pixel non-negative unmixing
+//! and the joint reconstruction's Chambolle–Pock iterations — giving the CPU's answers within
+//! stated f32 tolerances (docs/gpu.md) — and the forward model's multiplex. Data stays on the
+//! GPU from the uploaded frame to the cube; buffers are made once per rig and reused per frame.
 
 pub mod backend;
 pub mod context;
@@ -12,7 +12,9 @@ pub mod error;
 pub mod fft;
 pub mod fft_backend;
 pub mod gap;
+pub mod joint;
 pub mod mix;
+pub mod multiplex;
 pub mod reconstructor;
 pub mod select;
 pub mod tv;

@@ -25,14 +25,33 @@ impl GpuMix {
     /// Mix the planes of `z` (m[0].len() planes of `npx` f32) by `m` (rows = output planes)
     /// into a buffer of its own.
     pub fn new(ctx: &GpuContext, m: &[Vec<f64>], z: &wgpu::Buffer, npx: usize) -> Result<GpuMix> {
+        let out = ctx.storage("mixed planes", (m.len() * npx * 4) as u64);
+        GpuMix::into(ctx, m, z, npx, &out)
+    }
+
+    /// The same mix written into the first planes of `out` (another stage's buffer).
+    pub fn into(
+        ctx: &GpuContext,
+        m: &[Vec<f64>],
+        z: &wgpu::Buffer,
+        npx: usize,
+        out: &wgpu::Buffer,
+    ) -> Result<GpuMix> {
         let (rows, cols) = (m.len(), m.first().map_or(0, Vec::len));
         if rows == 0 || m.iter().any(|r| r.len() != cols) {
             return Err(GpuError::Shape(format!(
                 "a mixing matrix of {rows} rows of unequal or zero length"
             )));
         }
+        let bytes = |planes: usize| (planes * npx * 4) as u64;
+        if bytes(rows) > out.size() || bytes(cols) > z.size() {
+            return Err(GpuError::Shape(format!(
+                "a {rows}×{cols} mix of {npx} pixels between buffers of {} and {} bytes",
+                z.size(),
+                out.size()
+            )));
+        }
         let flat: Vec<f32> = m.iter().flatten().map(|&v| v as f32).collect();
-        let out = ctx.storage("mixed planes", (rows * npx * 4) as u64);
         let uniform = ctx.uniform(
             "mix params",
             &Params {
@@ -48,10 +67,13 @@ impl GpuMix {
             ctx,
             &module,
             "mix",
-            &[z, &out, &matrix, &uniform],
+            &[z, out, &matrix, &uniform],
             linear_groups(npx, 256),
         );
-        Ok(GpuMix { launch, out })
+        Ok(GpuMix {
+            launch,
+            out: out.clone(),
+        })
     }
 
     /// Record the mix.

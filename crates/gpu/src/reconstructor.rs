@@ -1,26 +1,30 @@
 //! The reconstruction of one rig on the GPU — the frame's dark/flat correction (on the host,
 //! when the rig has one), demultiplexing, GAP or GAP-TV de-aliasing, the crosstalk mix, the
-//! exact non-negative unmixing — in one submission per frame, built from the core's
-//! `Reconstructor` so both give the same cube. The joint method is not on the GPU.
+//! exact non-negative unmixing, or for the joint method its seed and iterations — in one
+//! submission per frame, built from the core's `Reconstructor` so both give the same cube.
 
 use crate::context::GpuContext;
 use crate::demux::GpuDemux;
-use crate::error::{GpuError, Result};
+use crate::error::Result;
 use crate::gap::GpuGap;
+use crate::joint::GpuJoint;
 use crate::mix::GpuMix;
 use crate::unmix::GpuUnmixer;
 use specmux_core::calibration::DarkFlat;
 use specmux_core::gap::GapStats;
+use specmux_core::joint::JointStats;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::unmix::UnmixStats;
 use specmux_core::Cube;
 
-/// What one frame's run reports: the unmixing's counters and, with GAP, its residuals.
+/// What one frame's run reports: the unmixing's counters and, with GAP, its residuals; with
+/// the joint method its objective (and default unmixing counters, as on the CPU).
 #[derive(Clone, Debug, Default)]
 pub struct GpuRun {
     pub unmix: UnmixStats,
-    /// Default (no iterations) for the `fourier` method.
+    /// Default (no iterations) for the `fourier` and joint methods.
     pub gap: GapStats,
+    pub joint: Option<JointStats>,
 }
 
 /// Demultiplexer, de-aliaser, mix and unmixer of one rig on the GPU, chained through buffers
@@ -32,19 +36,17 @@ pub struct GpuReconstructor {
     /// x = M z after GAP (without GAP the demodulation kernel mixes; None without crosstalk).
     mix: Option<GpuMix>,
     pub unmix: GpuUnmixer,
+    /// The joint method: the seed α₀ = H⁻¹Fᵀx̂ (a mix of the channels into α's planes) and the
+    /// iterations, which write the cube into the unmixer's output (None for the other methods).
+    joint: Option<(GpuMix, GpuJoint)>,
     dark_flat: Option<DarkFlat>,
     /// The channels the unmixing reads, copied for `demultiplex` and `dealias`.
     channels_staging: wgpu::Buffer,
 }
 
 impl GpuReconstructor {
-    /// Mirror `recon`'s demultiplexer, GAP, crosstalk inverse and unmixer.
+    /// Mirror `recon`'s demultiplexer, GAP or joint solver, crosstalk inverse and unmixer.
     pub fn new(ctx: &GpuContext, recon: &Reconstructor) -> Result<GpuReconstructor> {
-        if recon.joint.is_some() {
-            return Err(GpuError::Unsupported(
-                "the joint method's iterations (method = \"joint\")".into(),
-            ));
-        }
         let (w, h) = recon.demux.size();
         let npx = w * h;
         let demix = recon.demix.as_deref();
@@ -61,12 +63,28 @@ impl GpuReconstructor {
         };
         let channels = mix.as_ref().map_or(demux.output(), GpuMix::output);
         let unmix = GpuUnmixer::new(ctx, &recon.unmixer, npx, channels)?;
+        let joint = match &recon.joint {
+            None => None,
+            Some(j) => {
+                let t = recon.unmixer.tables();
+                let gj = GpuJoint::new(ctx, j, demux.frame(), unmix.output(), t.gains)?;
+                let c = recon.unmixer.channels();
+                let rows: Vec<Vec<f64>> = t
+                    .unconstrained
+                    .chunks_exact(c)
+                    .map(<[f64]>::to_vec)
+                    .collect();
+                let seed = GpuMix::into(ctx, &rows, demux.output(), npx, gj.alpha_buffer())?;
+                Some((seed, gj))
+            }
+        };
         Ok(GpuReconstructor {
             channels_staging: ctx.readback("channels staging", channels.size()),
             demux,
             gap,
             mix,
             unmix,
+            joint,
             dark_flat: recon.calibration.dark_flat.clone(),
         })
     }
@@ -79,14 +97,17 @@ impl GpuReconstructor {
         }
     }
 
-    /// The buffer of channel planes the unmixing reads.
-    fn channels(&self) -> &wgpu::Buffer {
-        self.mix
-            .as_ref()
-            .map_or(self.demux.output(), GpuMix::output)
+    /// The buffer of channel planes the unmixing reads (the joint method's Fα after `dealias`).
+    fn channels(&self, dealias: bool) -> &wgpu::Buffer {
+        match (&self.joint, &self.mix) {
+            (Some((_, j)), _) if dealias => j.channels(),
+            (_, Some(m)) => m.output(),
+            _ => self.demux.output(),
+        }
     }
 
-    /// Record demultiplexing, GAP (when `dealias`) and the mix into `enc`.
+    /// Record demultiplexing, GAP (when `dealias`) and the mix, or the joint method's seed and
+    /// whole run (cube and channels Fα included) into `enc`.
     fn encode_channels(&self, enc: &mut wgpu::CommandEncoder, dealias: bool) {
         self.demux.encode(enc);
         if let Some(g) = self.gap.as_ref().filter(|_| dealias) {
@@ -94,6 +115,10 @@ impl GpuReconstructor {
         }
         if let Some(m) = &self.mix {
             m.record(&mut enc.begin_compute_pass(&Default::default()));
+        }
+        if let Some((seed, j)) = self.joint.as_ref().filter(|_| dealias) {
+            seed.record(&mut enc.begin_compute_pass(&Default::default()));
+            j.encode(enc);
         }
     }
 
@@ -109,8 +134,9 @@ impl GpuReconstructor {
         self.upload(ctx, frame)?;
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         self.encode_channels(&mut enc, dealias);
-        let bytes = self.channels().size();
-        enc.copy_buffer_to_buffer(self.channels(), 0, &self.channels_staging, 0, bytes);
+        let src = self.channels(dealias);
+        let bytes = self.channels_staging.size();
+        enc.copy_buffer_to_buffer(src, 0, &self.channels_staging, 0, bytes);
         ctx.queue.submit([enc.finish()]);
         let mut out = Cube::zeros(self.demux.w, self.demux.h, self.unmix.channels);
         ctx.read_into(&self.channels_staging, &mut out.data)?;
@@ -122,11 +148,36 @@ impl GpuReconstructor {
         self.channels_of(ctx, frame, false)
     }
 
-    /// The channels after GAP and the crosstalk mix (the `xgap` of `Reconstructor::run`),
-    /// and GAP's statistics.
+    /// The channels after GAP and the crosstalk mix, or the joint method's Fα (the `xgap` of
+    /// `Reconstructor::run`), and GAP's statistics.
     pub fn dealias(&self, ctx: &GpuContext, frame: &Cube) -> Result<(Cube, GapStats)> {
         let x = self.channels_of(ctx, frame, true)?;
+        if let Some((_, j)) = &self.joint {
+            j.stats(ctx)?;
+        }
         Ok((x, self.gap_stats(ctx)?))
+    }
+
+    /// Record the unmixing unless the joint method made the cube already.
+    fn encode_unmix(&self, enc: &mut wgpu::CommandEncoder) {
+        if self.joint.is_none() {
+            self.unmix.encode(enc);
+        }
+    }
+
+    /// The statistics of a submission that held a whole run.
+    fn run_stats(&self, ctx: &GpuContext) -> Result<GpuRun> {
+        Ok(match &self.joint {
+            Some((_, j)) => GpuRun {
+                joint: Some(j.stats(ctx)?),
+                ..Default::default()
+            },
+            None => GpuRun {
+                gap: self.gap_stats(ctx)?,
+                unmix: self.unmix.stats(ctx)?,
+                joint: None,
+            },
+        })
     }
 
     /// The cube of a raw frame, read back into `cube` (bands × w × h, kept by the caller from
@@ -135,13 +186,10 @@ impl GpuReconstructor {
         self.upload(ctx, frame)?;
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         self.encode_channels(&mut enc, true);
-        self.unmix.encode(&mut enc);
+        self.encode_unmix(&mut enc);
         self.unmix.encode_readback(&mut enc);
         ctx.queue.submit([enc.finish()]);
-        let run = GpuRun {
-            gap: self.gap_stats(ctx)?,
-            unmix: self.unmix.stats(ctx)?,
-        };
+        let run = self.run_stats(ctx)?;
         self.unmix.read_cube(ctx, cube)?;
         Ok(run)
     }
@@ -152,12 +200,9 @@ impl GpuReconstructor {
         self.upload(ctx, frame)?;
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         self.encode_channels(&mut enc, true);
-        self.unmix.encode(&mut enc);
+        self.encode_unmix(&mut enc);
         ctx.queue.submit([enc.finish()]);
-        Ok(GpuRun {
-            gap: self.gap_stats(ctx)?,
-            unmix: self.unmix.stats(ctx)?,
-        })
+        self.run_stats(ctx)
     }
 
     /// An empty output cube of the right size for `run_into`.

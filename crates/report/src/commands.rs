@@ -93,33 +93,17 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
 }
 
 /// One frame's cube and unmixing counters on the device `[compute] device` names, with a line
-/// of stage times. The GPU (feature `gpu`) runs the whole chain of the `fourier`, `gap` and
-/// `gap-tv` methods: demultiplex, de-alias, crosstalk mix, unmix. The joint method is not on
-/// the GPU yet, so `gpu` with it is an error and `auto` with it, or without an adapter, stays
-/// on the CPU and says so in one line.
+/// of stage times. The GPU (feature `gpu`) runs the whole chain of every method: demultiplex,
+/// de-alias (GAP, GAP-TV) and crosstalk mix, unmix, or the joint method's seed and iterations;
+/// `auto` without an adapter stays on the CPU and says so in one line.
 fn reconstruct_on_device(
     exp: &Experiment,
     recon: &Reconstructor,
     frame: &Cube,
 ) -> Result<(Cube, UnmixStats, String)> {
-    let joint = recon.joint.is_some();
-    match (exp.compute.device, joint) {
-        (ComputeDevice::Cpu, _) => {}
-        (ComputeDevice::Gpu, true) => {
-            return Err(Error::config(
-                &exp.file,
-                "compute.device",
-                "gpu",
-                "the joint method is not on the GPU yet: set [reconstruct.gap] method = \"gap\", \"gap-tv\" or \"fourier\", or device = \"cpu\"",
-            ))
-        }
-        (ComputeDevice::Auto, true) => {
-            eprintln!("compute device auto: the joint method is not on the GPU yet; reconstructing on the CPU")
-        }
-        (_, false) => {
-            if let Some(done) = gpu_reconstruct(exp, recon, frame)? {
-                return Ok(done);
-            }
+    if exp.compute.device != ComputeDevice::Cpu {
+        if let Some(done) = gpu_reconstruct(exp, recon, frame)? {
+            return Ok(done);
         }
     }
     let r = recon.run(frame, None)?;
@@ -147,10 +131,13 @@ fn gpu_reconstruct(
     let mut cube = g.output_cube();
     let t = std::time::Instant::now();
     let run = g.run_into(ctx, frame, &mut cube).map_err(err)?;
+    let iterations = run
+        .joint
+        .as_ref()
+        .map_or(run.gap.iterations, |j| j.iterations);
     let times = format!(
-        "{}: setup {t_setup:.4} s, demultiplex + de-alias ({} iterations) + unmix {:.4} s (first frame)",
+        "{}: setup {t_setup:.4} s, demultiplex + de-alias ({iterations} iterations) + unmix {:.4} s (first frame)",
         device.describe(),
-        run.gap.iterations,
         t.elapsed().as_secs_f64()
     );
     Ok(Some((cube, run.unmix, times)))

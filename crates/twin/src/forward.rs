@@ -4,7 +4,7 @@
 //! before the one that makes its input; a step the experiment does not ask for is not built.
 
 use crate::experiment::Experiment;
-use crate::multiplex::multiplex;
+use crate::multiplex::{for_device, Multiplexer};
 use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
@@ -159,7 +159,16 @@ impl Pipeline {
             },
             patterns,
             timing: exp.rig.timing.as_ref().map(timing_stage).transpose()?,
-            multiplex: MultiplexStage,
+            multiplex: MultiplexStage {
+                device: for_device(
+                    exp.compute.device,
+                    (rig.width, rig.height, rig.imaged_carriers.len()),
+                )
+                .map_err(|e| {
+                    let device = format!("{:?}", exp.compute.device).to_lowercase();
+                    e.within(&exp.file, "compute.device", device)
+                })?,
+            },
             sensor: match &exp.rig.sensor {
                 Some(c) => Some(SensorStage {
                     cfg: c.clone(),
@@ -543,22 +552,28 @@ impl Step<Channels, Exposed> for TimingStage {
     }
 }
 
-/// y = Σ_k z_k ⊙ s̃_k: the monochrome camera sums the modulated images.
-struct MultiplexStage;
+/// y = Σ_k z_k ⊙ s̃_k: the monochrome camera sums the modulated images, on the device
+/// `[compute] device` names.
+struct MultiplexStage {
+    device: Box<dyn Multiplexer>,
+}
 
 impl Stage for MultiplexStage {
     fn name(&self) -> &'static str {
         "multiplex"
     }
     fn describe(&self) -> String {
-        "y = Σ_k z_k ⊙ s̃_k (z = x without timing; noiseless, unquantised)".into()
+        format!(
+            "y = Σ_k z_k ⊙ s̃_k (z = x without timing; noiseless, unquantised), on the {}",
+            self.device.device().to_uppercase()
+        )
     }
 }
 
 impl<'a> Step<Modulated<'a>, Frame> for MultiplexStage {
     fn run(&self, m: &Modulated<'a>) -> Result<Frame> {
         Ok(Frame {
-            y: multiplex(&m.exposed.z, m.patterns)?,
+            y: self.device.multiplex(&m.exposed.z, m.patterns)?,
             full_scale: full_scale(&m.exposed.white, m.patterns),
         })
     }

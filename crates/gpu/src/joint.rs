@@ -1,0 +1,413 @@
+//! The joint reconstruction's iterations on the GPU (shaders/joint.wgsl), built from the core's
+//! `Joint` tables so both run the same Chambolle–Pock steps in the same order of summation:
+//! per frame the means that fix λ, τ and σ, M = (I + τη'Q)⁻¹ and the per-pixel proximal tables
+//! (all on the GPU, no round trip), then the iterations (dual step with the pixel costs, their
+//! sum, primal step), the final objective, the non-finite check, the cube diag(g)·Bα clipped at
+//! zero with its violation, and the channels Fα. Per frame only the objective list and a few
+//! words come back.
+
+use crate::context::{linear_groups, GpuContext, Launch};
+use crate::error::{GpuError, Result};
+use crate::gap;
+use crate::mix::GpuMix;
+use specmux_core::joint::{Joint, JointStats};
+use specmux_core::Cube;
+
+/// Threads per workgroup of shaders/joint.wgsl.
+const WORKGROUP: u32 = 256;
+
+/// Words before M in the per-frame scalars (shaders/joint.wgsl's `sc`): the list count,
+/// mean|y|, mean|α₀|, λ, τ, σ and two unused.
+const SCALARS: usize = 8;
+
+/// The `Params` struct of shaders/joint.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    w: u32,
+    h: u32,
+    npx: u32,
+    bands: u32,
+    lambda_per_y: f32,
+    ratio: f32,
+    step: f32,
+    _pad: f32,
+}
+
+/// The iterate and dual variables read back, plane-major (value k of pixel p at k·npx + p).
+pub struct JointGpuState {
+    pub alpha: Vec<f32>,
+    pub bar: Vec<f32>,
+    pub qx: Vec<f32>,
+    pub qy: Vec<f32>,
+    /// The constraint dual, `padded_bands` planes.
+    pub r: Vec<f32>,
+    /// 1 where r ≠ 0 somewhere in the pixel's bands, else 0.
+    pub active: Vec<f32>,
+    pub lambda: f32,
+    pub tau: f32,
+    pub sigma: f32,
+}
+
+/// The joint solver of one rig on the GPU, bound to the frame and the cube buffers.
+pub struct GpuJoint {
+    pub iterations: usize,
+    j: usize,
+    nbp: usize,
+    npx: usize,
+    /// Σ|y| and Σ|α₀| (two sums each), the scalars and M, the tables and the state's start.
+    start: Vec<Launch>,
+    dual: Launch,
+    /// Σ of the pixel costs appended to the objective list.
+    cost_sum: [Launch; 2],
+    primal: Launch,
+    /// The pixel costs at the current α (the objective after the last step).
+    cost: Launch,
+    non_finite: Launch,
+    cube: GpuMix,
+    clip: Launch,
+    channels: GpuMix,
+    b: Buffers,
+    /// The objective list, the scalars' header, the extremes and the counter, for the host.
+    staging: wgpu::Buffer,
+}
+
+impl GpuJoint {
+    /// Mirror `joint` on the GPU: `frame` holds the linearised frame y (w × h f32); the cube
+    /// diag(gains)·Bα goes to the first planes of `cube`. The seed α₀ is written into the
+    /// first J planes of `alpha_buffer()` before `encode` (the reconstructor's seed mix, or an
+    /// upload). Every buffer is made here, once; ω is 1 until `set_weights`.
+    pub fn new(
+        ctx: &GpuContext,
+        joint: &Joint,
+        frame: &wgpu::Buffer,
+        cube: &wgpu::Buffer,
+        gains: &[f64],
+    ) -> Result<GpuJoint> {
+        let t = joint.tables();
+        let (j, npx) = (t.basis_len, t.width * t.height);
+        if gains.len() != t.basis.nrows() {
+            return Err(GpuError::Shape(format!(
+                "{} output gains for {} bands",
+                gains.len(),
+                t.basis.nrows()
+            )));
+        }
+        let b = Buffers::new(ctx, joint);
+        let uniform = ctx.uniform("joint params", &params(joint));
+        let module = ctx.module("joint", &source(j, t.padded_bands));
+        let pixels = linear_groups(npx, WORKGROUP);
+        let launch = |entry, bound: &[(u32, &wgpu::Buffer)], groups| {
+            let all = joined(&[(0, &uniform)], bound);
+            Launch::bound(ctx, &module, entry, &all, groups)
+        };
+        let common = [
+            (1, &b.rig),
+            (2, frame),
+            (3, &b.scalars),
+            (4, &b.tab),
+            (5, &b.state),
+        ];
+        let gm = gap::module(ctx);
+        let mean = |input, planes: usize| {
+            let scale = 1.0 / (npx * planes) as f64;
+            gap::abs_sum(
+                ctx,
+                &gm,
+                input,
+                (npx, planes),
+                scale,
+                &b.partials,
+                &b.scalars,
+            )
+        };
+        let mut start: Vec<Launch> = mean(frame, 1)
+            .into_iter()
+            .chain(mean(&b.state, j))
+            .collect();
+        start.push(launch("setup", &[(1, &b.rig), (3, &b.scalars)], [1, 1, 1]));
+        start.push(launch("tables", &joined(&common, &[(6, &b.r)]), pixels));
+        let ones = vec![1.0; t.system.nrows()];
+        let joint = GpuJoint {
+            iterations: t.config.iterations,
+            j,
+            nbp: t.padded_bands,
+            npx,
+            start,
+            dual: launch("dual", &joined(&common, &[(6, &b.r), (7, &b.cost)]), pixels),
+            cost_sum: gap::abs_sum(ctx, &gm, &b.cost, (npx, 1), 1.0, &b.partials, &b.objective),
+            primal: launch(
+                "primal",
+                &[
+                    (1, &b.rig),
+                    (3, &b.scalars),
+                    (4, &b.tab),
+                    (5, &b.state),
+                    (6, &b.r),
+                ],
+                pixels,
+            ),
+            cost: launch("objective", &joined(&common, &[(7, &b.cost)]), pixels),
+            non_finite: gap::non_finite(ctx, &gm, &b.state, (npx, j), &b.counter),
+            cube: GpuMix::into(ctx, &scaled_rows(t.basis, gains), &b.state, npx, cube)?,
+            clip: launch("clip", &[(8, cube), (9, &b.extremes)], pixels),
+            channels: GpuMix::new(ctx, &scaled_rows(t.system, &ones), &b.state, npx)?,
+            staging: ctx.readback(
+                "joint staging",
+                b.objective.size() + 4 * SCALARS as u64 + 12,
+            ),
+            b,
+        };
+        joint.write_weights(ctx, &vec![1.0; npx]);
+        Ok(joint)
+    }
+
+    /// Per-pixel data weights ω (one plane, finite, ≥ 0; the CPU's `start(.., Some(ω))`),
+    /// kept for every later frame.
+    pub fn set_weights(&self, ctx: &GpuContext, omega: &Cube) -> Result<()> {
+        if omega.planes != 1 || omega.pixels() != self.npx {
+            return Err(GpuError::Shape(format!(
+                "joint: weights {}×{}×{} for {} pixels",
+                omega.width, omega.height, omega.planes, self.npx
+            )));
+        }
+        if omega.data.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(GpuError::Numerical(
+                "joint: a data weight is negative, NaN or infinite".into(),
+            ));
+        }
+        self.write_weights(ctx, &omega.data);
+        Ok(())
+    }
+
+    fn write_weights(&self, ctx: &GpuContext, omega: &[f32]) {
+        let at = ((self.j + 3) * self.npx * 4) as u64;
+        ctx.queue
+            .write_buffer(&self.b.tab, at, bytemuck::cast_slice(omega));
+    }
+
+    /// The state buffer: its first J planes are α (the seed goes there before `encode`).
+    pub fn alpha_buffer(&self) -> &wgpu::Buffer {
+        &self.b.state
+    }
+
+    /// The channels x = Fα (C planes) after `encode`.
+    pub fn channels(&self) -> &wgpu::Buffer {
+        self.channels.output()
+    }
+
+    /// Record a whole run from the seed: start, `iterations` steps, `encode_finish`.
+    pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
+        self.encode_start(enc);
+        self.encode_steps(enc, self.iterations);
+        self.encode_finish(enc);
+    }
+
+    /// Record the start of a run: the lists cleared, λ, τ, σ, M, the tables, ᾱ = α, q = r = 0.
+    pub fn encode_start(&self, enc: &mut wgpu::CommandEncoder) {
+        for b in [
+            &self.b.scalars,
+            &self.b.objective,
+            &self.b.extremes,
+            &self.b.counter,
+        ] {
+            enc.clear_buffer(b, 0, None);
+        }
+        let mut cp = enc.begin_compute_pass(&Default::default());
+        self.start.iter().for_each(|l| l.record(&mut cp));
+    }
+
+    /// Record `steps` iterations (at most `iterations` in all per start: the objective list
+    /// has room for that many): the dual step and its objective, then the primal step.
+    pub fn encode_steps(&self, enc: &mut wgpu::CommandEncoder, steps: usize) {
+        let mut cp = enc.begin_compute_pass(&Default::default());
+        for _ in 0..steps {
+            self.record_dual(&mut cp);
+            self.primal.record(&mut cp);
+        }
+    }
+
+    /// Record the dual step alone, with the objective at the current α appended to the list.
+    pub fn encode_dual(&self, enc: &mut wgpu::CommandEncoder) {
+        self.record_dual(&mut enc.begin_compute_pass(&Default::default()));
+    }
+
+    /// Record the primal step alone.
+    pub fn encode_primal(&self, enc: &mut wgpu::CommandEncoder) {
+        self.primal
+            .record(&mut enc.begin_compute_pass(&Default::default()));
+    }
+
+    fn record_dual(&self, cp: &mut wgpu::ComputePass) {
+        self.dual.record(cp);
+        self.cost_sum.iter().for_each(|l| l.record(cp));
+    }
+
+    /// Record the end of a run: the final objective, the non-finite check, the cube (clipped,
+    /// with its extremes), the channels, and the copies `stats` reads.
+    pub fn encode_finish(&self, enc: &mut wgpu::CommandEncoder) {
+        {
+            let mut cp = enc.begin_compute_pass(&Default::default());
+            self.cost.record(&mut cp);
+            self.cost_sum.iter().for_each(|l| l.record(&mut cp));
+            self.non_finite.record(&mut cp);
+            self.cube.record(&mut cp);
+            self.clip.record(&mut cp);
+            self.channels.record(&mut cp);
+        }
+        let o = self.b.objective.size();
+        let s = 4 * SCALARS as u64;
+        enc.copy_buffer_to_buffer(&self.b.objective, 0, &self.staging, 0, o);
+        enc.copy_buffer_to_buffer(&self.b.scalars, 0, &self.staging, o, s);
+        enc.copy_buffer_to_buffer(&self.b.extremes, 0, &self.staging, o + s, 8);
+        enc.copy_buffer_to_buffer(&self.b.counter, 0, &self.staging, o + s + 8, 4);
+    }
+
+    /// After the submission that held `encode` (or `encode_finish`): the objective at the seed
+    /// and after each step, λ, τ, σ and the cube's violation, or an error when α holds a NaN
+    /// or an infinite value, as on the CPU. `seconds` is 0: the run is part of one submission.
+    pub fn stats(&self, ctx: &GpuContext) -> Result<JointStats> {
+        let mut w = vec![0u32; (self.staging.size() / 4) as usize];
+        ctx.read_into(&self.staging, &mut w)?;
+        let f = |i: usize| f32::from_bits(w[i]) as f64;
+        let tail = w.len() - SCALARS - 3;
+        let non_finite = w[w.len() - 1];
+        if non_finite > 0 {
+            return Err(GpuError::Numerical(format!(
+                "joint: {non_finite} non-finite coefficients after {} iterations",
+                w[0].saturating_sub(1)
+            )));
+        }
+        let (hi, neg) = (f(w.len() - 3), f(w.len() - 2));
+        let n = (w[0] as usize).min(tail - 1);
+        Ok(JointStats {
+            iterations: n.saturating_sub(1),
+            objective: (1..=n).map(f).collect(),
+            lambda: f(tail + 3),
+            steps: [f(tail + 4), f(tail + 5)],
+            violation: if hi > 0.0 { neg / hi } else { 0.0 },
+            ..Default::default()
+        })
+    }
+
+    /// The iterate, the duals and the scalars read back (one round trip each; for tests).
+    pub fn state(&self, ctx: &GpuContext) -> Result<JointGpuState> {
+        let (j, n) = (self.j, self.npx);
+        let st: Vec<f32> = ctx.read(&self.b.state, 4 * j * n)?;
+        let mut r: Vec<f32> = ctx.read(&self.b.r, (self.nbp + 1) * n)?;
+        let sc: Vec<f32> = ctx.read(&self.b.scalars, SCALARS)?;
+        let active = r.split_off(self.nbp * n);
+        let part = |k: usize| st[k * j * n..(k + 1) * j * n].to_vec();
+        Ok(JointGpuState {
+            alpha: part(0),
+            bar: part(1),
+            qx: part(2),
+            qy: part(3),
+            r,
+            active,
+            lambda: sc[3],
+            tau: sc[4],
+            sigma: sc[5],
+        })
+    }
+}
+
+/// The buffers of one rig's run: shaders/joint.wgsl's bindings and the sums' partials.
+struct Buffers {
+    rig: wgpu::Buffer,
+    /// m | t | c | k | ω.
+    tab: wgpu::Buffer,
+    /// α | ᾱ | qx | qy.
+    state: wgpu::Buffer,
+    /// r (padded bands) | active.
+    r: wgpu::Buffer,
+    cost: wgpu::Buffer,
+    scalars: wgpu::Buffer,
+    objective: wgpu::Buffer,
+    extremes: wgpu::Buffer,
+    counter: wgpu::Buffer,
+    partials: wgpu::Buffer,
+}
+
+impl Buffers {
+    /// Every buffer of `joint`'s run, zeroed but for the rig's tables.
+    fn new(ctx: &GpuContext, joint: &Joint) -> Buffers {
+        let t = joint.tables();
+        let (j, npx) = (t.basis_len as u64, t.width * t.height);
+        let plane = (npx * 4) as u64;
+        let groups = gap::count(linear_groups(npx * t.basis_len, WORKGROUP));
+        Buffers {
+            rig: ctx.storage_init("joint rig tables", &rig_tables(joint)),
+            tab: ctx.storage("joint prox tables", (j + 4) * plane),
+            state: ctx.storage("joint state", 4 * j * plane),
+            r: ctx.storage("joint constraint dual", (t.padded_bands as u64 + 1) * plane),
+            cost: ctx.storage("joint pixel costs", plane),
+            scalars: ctx.storage("joint scalars", 4 * (SCALARS as u64 + j * j)),
+            objective: ctx.storage("joint objective", 4 * (t.config.iterations as u64 + 2)),
+            extremes: ctx.storage("joint cube extremes", 8),
+            counter: ctx.storage("joint non-finite", 4),
+            partials: ctx.storage("joint partials", 4 * groups as u64),
+        }
+    }
+}
+
+/// shaders/joint.wgsl's `Params` for `joint`.
+fn params(joint: &Joint) -> Params {
+    let t = joint.tables();
+    Params {
+        w: t.width as u32,
+        h: t.height as u32,
+        npx: (t.width * t.height) as u32,
+        bands: t.basis.nrows() as u32,
+        lambda_per_y: (t.config.tv_weight * t.mean_a_norm) as f32,
+        ratio: t.config.step_ratio as f32,
+        step: (t.step_product.sqrt() / t.operator_norm) as f32,
+        _pad: 0.0,
+    }
+}
+
+/// The rows of `m` each times its gain (the mixing matrices of `GpuMix`).
+fn scaled_rows(m: &nalgebra::DMatrix<f64>, gains: &[f64]) -> Vec<Vec<f64>> {
+    m.row_iter()
+        .zip(gains)
+        .map(|(row, &g)| row.iter().map(|v| v * g).collect())
+        .collect()
+}
+
+/// The bindings `a` then `b`.
+fn joined<'a>(
+    a: &[(u32, &'a wgpu::Buffer)],
+    b: &[(u32, &'a wgpu::Buffer)],
+) -> Vec<(u32, &'a wgpu::Buffer)> {
+    a.iter().chain(b).copied().collect()
+}
+
+/// shaders/joint.wgsl with the rig's J and padded band count written over its placeholders.
+fn source(j: usize, nbp: usize) -> String {
+    let mut src = include_str!("shaders/joint.wgsl").to_string();
+    for (line, value) in [("const J: u32 = 8u;", j), ("const NBP: u32 = 64u;", nbp)] {
+        assert!(src.contains(line), "shaders/joint.wgsl declares {line}");
+        let name = &line[..line.find(':').unwrap_or(0)];
+        src = src.replace(line, &format!("{name}: u32 = {value}u;"));
+    }
+    src
+}
+
+/// shaders/joint.wgsl's `rig`: a (plane-major) | βB by columns | column minima | maxima |
+/// η'Q row-major | its eigenvectors (column i the i-th) | eigenvalues, in f32. M = (I + τη'Q)⁻¹
+/// is V diag(1/(1 + τe)) Vᵀ from these, since τ is known only on the GPU.
+fn rig_tables(joint: &Joint) -> Vec<f32> {
+    let t = joint.tables();
+    let (j, n) = (t.basis_len, t.width * t.height);
+    let mut out: Vec<f32> = (0..j)
+        .flat_map(|k| (0..n).map(move |p| t.a[p * j + k]))
+        .collect();
+    out.extend_from_slice(t.basis_columns);
+    out.extend(t.column_range.iter().map(|r| r.0));
+    out.extend(t.column_range.iter().map(|r| r.1));
+    out.extend(t.smoothness.transpose().iter().map(|&v| v as f32));
+    let eig = t.smoothness.clone().symmetric_eigen();
+    out.extend(eig.eigenvectors.transpose().iter().map(|&v| v as f32));
+    out.extend(eig.eigenvalues.iter().map(|&v| v as f32));
+    out
+}

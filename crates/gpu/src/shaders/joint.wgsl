@@ -1,0 +1,359 @@
+// The joint reconstruction's Chambolle–Pock iterations (crates/core/src/joint.rs does the same
+// on the CPU, step for step and in the same order of summation). The CPU keeps its fields
+// pixel-major; here they are plane-major: value k of pixel p is at k·npx + p. One invocation
+// per pixel; the per-pixel state lives in arrays of the rig's J and padded band count, which
+// specmux-gpu writes over the constants below.
+
+struct Params {
+    w: u32,
+    h: u32,
+    npx: u32,
+    // Bands of the cube `clip` reads.
+    bands: u32,
+    // λ per unit of mean|y| (tv_weight · mean‖a‖), the τ/σ balance, √(τσ‖K‖²)/‖K‖.
+    lambda_per_y: f32,
+    ratio: f32,
+    step: f32,
+    _pad1: f32,
+}
+
+// Basis vectors and bands padded to lanes (specmux-gpu writes the rig's values here).
+const J: u32 = 8u;
+const NBP: u32 = 64u;
+const LANES: u32 = 8u;
+
+// `rig`, per rig: a (J planes) | βB by columns (J × NBP) | column minima (J) | maxima (J) |
+// η'Q (J × J, row-major) | its eigenvectors (J × J, column i the i-th) | eigenvalues (J).
+// `sc`, per frame: [count, mean|y|, mean|α₀|] (a list the sums append to), λ, τ, σ, –, –,
+// then M = (I + τη'Q)⁻¹ (J × J, column-major as on the CPU).
+// `tab`, per frame: m = M a (J planes) | t = τωy | c = τω/(1 + τω aᵀm) | k = aᵀm | ω.
+// `st`: α | ᾱ | qx | qy (J planes each). `r`: the constraint dual (NBP planes), then the
+// active flag (1 where r ≠ 0 somewhere in the pixel's bands).
+@group(0) @binding(0) var<uniform> prm: Params;
+@group(0) @binding(1) var<storage, read> rig: array<f32>;
+@group(0) @binding(2) var<storage, read> y: array<f32>;
+@group(0) @binding(3) var<storage, read_write> sc: array<f32>;
+@group(0) @binding(4) var<storage, read_write> tab: array<f32>;
+@group(0) @binding(5) var<storage, read_write> st: array<f32>;
+@group(0) @binding(6) var<storage, read_write> r: array<f32>;
+@group(0) @binding(7) var<storage, read_write> cost: array<f32>;
+@group(0) @binding(8) var<storage, read_write> cube: array<f32>;
+@group(0) @binding(9) var<storage, read_write> extremes: array<atomic<u32>, 2>;
+
+const SC_LAMBDA: u32 = 3u;
+const SC_TAU: u32 = 4u;
+const SC_SIGMA: u32 = 5u;
+const SC_MAT: u32 = 8u;
+const ALPHA: u32 = 0u;
+const BAR: u32 = J;
+const QX: u32 = 2u * J;
+const QY: u32 = 3u * J;
+
+fn at(plane: u32, p: u32) -> u32 {
+    return plane * prm.npx + p;
+}
+
+// Offsets of the per-rig tables in `rig`.
+fn bcol(j: u32, k: u32) -> f32 {
+    return rig[J * prm.npx + j * NBP + k];
+}
+fn col_lo(j: u32) -> f32 {
+    return rig[J * prm.npx + J * NBP + j];
+}
+fn col_hi(j: u32) -> f32 {
+    return rig[J * prm.npx + J * NBP + J + j];
+}
+fn eq(row: u32, col: u32) -> f32 {
+    return rig[J * prm.npx + J * NBP + 2u * J + row * J + col];
+}
+fn eigvec(row: u32, i: u32) -> f32 {
+    return rig[J * prm.npx + J * NBP + 2u * J + J * J + row * J + i];
+}
+fn eigval(i: u32) -> f32 {
+    return rig[J * prm.npx + J * NBP + 2u * J + 2u * J * J + i];
+}
+
+// Invocation i of a 1-D dispatch folded into (x, y) workgroups of 256.
+fn linear(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
+    return gid.x + gid.y * nwg.x * 256u;
+}
+
+// ---- setup (one invocation): λ = tv_weight·mean|y|·mean‖a‖; s = mean|α₀|/λ (1 when either
+// is 0); τ = ratio·s·step, σ = step/(ratio·s); M = V diag(1/(1 + τe)) Vᵀ from η'Q = V diag(e) Vᵀ.
+@compute @workgroup_size(1)
+fn setup() {
+    let lambda = prm.lambda_per_y * sc[1];
+    let mean_alpha = sc[2];
+    var scale = 1.0;
+    if lambda > 0.0 && mean_alpha > 0.0 {
+        scale = mean_alpha / lambda;
+    }
+    let tau = prm.ratio * scale * prm.step;
+    sc[SC_LAMBDA] = lambda;
+    sc[SC_TAU] = tau;
+    sc[SC_SIGMA] = prm.step / (prm.ratio * scale);
+    for (var c = 0u; c < J; c++) {
+        for (var row = 0u; row < J; row++) {
+            var v = 0.0;
+            for (var i = 0u; i < J; i++) {
+                v += eigvec(row, i) * eigvec(c, i) / (1.0 + tau * eigval(i));
+            }
+            sc[SC_MAT + c * J + row] = v;
+        }
+    }
+}
+
+// out = M v (M column-major, as the CPU's `mat_vec`).
+fn mat_vec(v: array<f32, J>) -> array<f32, J> {
+    var out: array<f32, J>;
+    for (var row = 0u; row < J; row++) {
+        var acc = 0.0;
+        for (var c = 0u; c < J; c++) {
+            acc += sc[SC_MAT + c * J + row] * v[c];
+        }
+        out[row] = acc;
+    }
+    return out;
+}
+
+// ---- tables (per pixel): m = M a_p, k = a_pᵀm, t = τωy, c = τω/(1 + τωk); and the state's
+// start: ᾱ = α (the seed), q = 0, r = 0, not active.
+@compute @workgroup_size(256)
+fn tables(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    var ap: array<f32, J>;
+    for (var j = 0u; j < J; j++) {
+        ap[j] = rig[at(j, p)];
+    }
+    let m = mat_vec(ap);
+    var k = 0.0;
+    for (var j = 0u; j < J; j++) {
+        k += ap[j] * m[j];
+        tab[at(j, p)] = m[j];
+        st[at(BAR + j, p)] = st[at(ALPHA + j, p)];
+        st[at(QX + j, p)] = 0.0;
+        st[at(QY + j, p)] = 0.0;
+    }
+    let tw = sc[SC_TAU] * tab[at(J + 3u, p)];
+    tab[at(J, p)] = tw * y[p];
+    tab[at(J + 1u, p)] = tw / (1.0 + tw * k);
+    tab[at(J + 2u, p)] = k;
+    for (var b = 0u; b <= NBP; b++) {
+        r[at(b, p)] = 0.0;
+    }
+}
+
+// Forward differences of plane `plane` at pixel p = (x, row), 0 across the last column and row.
+fn gradient(plane: u32, p: u32, x: u32, row: u32) -> vec2<f32> {
+    let v = st[at(plane, p)];
+    var d = vec2<f32>(0.0, 0.0);
+    if x + 1u < prm.w {
+        d.x = st[at(plane, p + 1u)] - v;
+    }
+    if row + 1u < prm.h {
+        d.y = st[at(plane, p + prm.w)] - v;
+    }
+    return d;
+}
+
+// ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖ at pixel p (the CPU's `pixel_cost`, in f32).
+fn pixel_cost(p: u32, x: u32, row: u32) -> f32 {
+    var alpha: array<f32, J>;
+    var fit = 0.0;
+    for (var j = 0u; j < J; j++) {
+        alpha[j] = st[at(ALPHA + j, p)];
+        fit += rig[at(j, p)] * alpha[j];
+    }
+    var quad = 0.0;
+    for (var i = 0u; i < J; i++) {
+        for (var c = 0u; c < J; c++) {
+            quad += alpha[i] * eq(i, c) * alpha[c];
+        }
+    }
+    var g: array<vec2<f32>, J>;
+    for (var j = 0u; j < J; j++) {
+        g[j] = gradient(ALPHA + j, p, x, row);
+    }
+    // Σ gx² then Σ gy² in one running sum, as the CPU's chained iterator.
+    var g2 = 0.0;
+    for (var j = 0u; j < J; j++) {
+        g2 += g[j].x * g[j].x;
+    }
+    for (var j = 0u; j < J; j++) {
+        g2 += g[j].y * g[j].y;
+    }
+    let e = y[p] - fit;
+    return 0.5 * tab[at(J + 3u, p)] * e * e + 0.5 * quad + sc[SC_LAMBDA] * sqrt(g2);
+}
+
+// ---- cost (per pixel): the objective's share of each pixel at the current α.
+@compute @workgroup_size(256)
+fn objective(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    cost[p] = pixel_cost(p, p % prm.w, p / prm.w);
+}
+
+// True when min_k (βBᾱ)_k ≥ 0 follows from the per-column extremes of βB alone.
+fn surely_feasible(bar: array<f32, J>) -> bool {
+    var lower = 0.0;
+    for (var j = 0u; j < J; j++) {
+        if bar[j] >= 0.0 {
+            lower += bar[j] * col_lo(j);
+        } else {
+            lower += bar[j] * col_hi(j);
+        }
+    }
+    return lower >= 0.0;
+}
+
+// ---- dual (per pixel): the pixel's cost at α (for the objective), then
+// q ← P_{‖·‖≤λ}(q + σ∇ᾱ) jointly over J and both directions, and
+// r ← min(r + σβBᾱ, 0), skipped where r = 0 and the bound proves βBᾱ ≥ 0.
+@compute @workgroup_size(256)
+fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    let x = p % prm.w;
+    let row = p / prm.w;
+    cost[p] = pixel_cost(p, x, row);
+    let lambda = sc[SC_LAMBDA];
+    let sigma = sc[SC_SIGMA];
+    var qx: array<f32, J>;
+    var qy: array<f32, J>;
+    var bar: array<f32, J>;
+    for (var j = 0u; j < J; j++) {
+        let g = gradient(BAR + j, p, x, row);
+        qx[j] = st[at(QX + j, p)] + sigma * g.x;
+        qy[j] = st[at(QY + j, p)] + sigma * g.y;
+        bar[j] = st[at(BAR + j, p)];
+    }
+    var n2 = 0.0;
+    for (var j = 0u; j < J; j++) {
+        n2 += qx[j] * qx[j];
+    }
+    for (var j = 0u; j < J; j++) {
+        n2 += qy[j] * qy[j];
+    }
+    var f = 1.0;
+    if n2 > lambda * lambda {
+        f = 0.0;
+        if lambda > 0.0 {
+            f = lambda / sqrt(n2);
+        }
+    }
+    for (var j = 0u; j < J; j++) {
+        st[at(QX + j, p)] = qx[j] * f;
+        st[at(QY + j, p)] = qy[j] * f;
+    }
+    if r[at(NBP, p)] == 0.0 && surely_feasible(bar) {
+        return;
+    }
+    var flag = 0.0;
+    for (var k = 0u; k < NBP; k++) {
+        var u = 0.0;
+        for (var j = 0u; j < J; j++) {
+            u += bcol(j, k) * bar[j];
+        }
+        let v = min(r[at(k, p)] + sigma * u, 0.0);
+        r[at(k, p)] = v;
+        if v < 0.0 {
+            flag = 1.0;
+        }
+    }
+    r[at(NBP, p)] = flag;
+}
+
+// (βBᵀr)_j at pixel p in LANES partial sums, added up in lane order (the CPU's
+// `basis_t_times`).
+fn basis_t_times(j: u32, p: u32) -> f32 {
+    var acc: array<f32, LANES>;
+    for (var c = 0u; c < NBP; c += LANES) {
+        for (var l = 0u; l < LANES; l++) {
+            acc[l] += bcol(j, c + l) * r[at(c + l, p)];
+        }
+    }
+    var s = 0.0;
+    for (var l = 0u; l < LANES; l++) {
+        s += acc[l];
+    }
+    return s;
+}
+
+// ---- primal (per pixel): α⁺ = prox_{τf}(α − τ(∇ᵀq + βBᵀr)) in closed form
+// (Sherman–Morrison on (I + τη'Q + τω aaᵀ)⁻¹), then ᾱ = 2α⁺ − α.
+@compute @workgroup_size(256)
+fn primal(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    let x = p % prm.w;
+    let row = p / prm.w;
+    let tau = sc[SC_TAU];
+    let constrained = r[at(NBP, p)] != 0.0;
+    var alpha: array<f32, J>;
+    var v: array<f32, J>;
+    for (var j = 0u; j < J; j++) {
+        var left = 0.0;
+        if x > 0u {
+            left = st[at(QX + j, p - 1u)];
+        }
+        var up = 0.0;
+        if row > 0u {
+            up = st[at(QY + j, p - prm.w)];
+        }
+        let div = st[at(QX + j, p)] - left + st[at(QY + j, p)] - up;
+        alpha[j] = st[at(ALPHA + j, p)];
+        v[j] = alpha[j] + tau * div;
+        if constrained {
+            v[j] -= tau * basis_t_times(j, p);
+        }
+    }
+    let mv = mat_vec(v);
+    var mtv = 0.0;
+    for (var j = 0u; j < J; j++) {
+        mtv += tab[at(j, p)] * v[j];
+    }
+    let t = tab[at(J, p)];
+    let coef = t - tab[at(J + 1u, p)] * (mtv + t * tab[at(J + 2u, p)]);
+    for (var j = 0u; j < J; j++) {
+        let next = mv[j] + coef * tab[at(j, p)];
+        st[at(BAR + j, p)] = 2.0 * next - alpha[j];
+        st[at(ALPHA + j, p)] = next;
+    }
+}
+
+// ---- clip (per pixel, after the cube diag(g)·Bα is mixed): the largest value and the largest
+// −value over the bands into `extremes` (non-negative f32 order as their bits), then the
+// negative values set to zero.
+@compute @workgroup_size(256)
+fn clip(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    var hi = 0.0;
+    var neg = 0.0;
+    for (var b = 0u; b < prm.bands; b++) {
+        let v = cube[at(b, p)];
+        if v > hi {
+            hi = v;
+        }
+        if -v > neg {
+            neg = -v;
+        }
+        if v < 0.0 {
+            cube[at(b, p)] = 0.0;
+        }
+    }
+    atomicMax(&extremes[0], bitcast<u32>(hi));
+    atomicMax(&extremes[1], bitcast<u32>(neg));
+}
