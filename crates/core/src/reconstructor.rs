@@ -296,6 +296,11 @@ impl Reconstructor {
         })
     }
 
+    /// The camera noise model the joint method weighs its data term by (None: ω = 1).
+    pub fn joint_noise(&self) -> Option<&NoiseModel> {
+        self.noise.as_ref()
+    }
+
     /// The whole chain on one frame: linearise, demultiplex, de-alias (on what each pattern
     /// saw, z; `z_truth` gives GAP's per-iteration PSNR), undo the crosstalk, unmix.
     pub fn run(&self, frame: &Cube, z_truth: Option<&Cube>) -> Result<Reconstruction> {

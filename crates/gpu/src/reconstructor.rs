@@ -5,14 +5,14 @@
 
 use crate::context::GpuContext;
 use crate::demux::GpuDemux;
-use crate::error::Result;
+use crate::error::{GpuError, Result};
 use crate::gap::GpuGap;
 use crate::joint::GpuJoint;
 use crate::mix::GpuMix;
 use crate::unmix::GpuUnmixer;
 use specmux_core::calibration::DarkFlat;
 use specmux_core::gap::GapStats;
-use specmux_core::joint::JointStats;
+use specmux_core::joint::{Joint, JointStats, Prior, WeightRule};
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::unmix::UnmixStats;
 use specmux_core::Cube;
@@ -66,6 +66,7 @@ impl GpuReconstructor {
         let joint = match &recon.joint {
             None => None,
             Some(j) => {
+                gpu_joint_supported(j, recon)?;
                 let t = recon.unmixer.tables();
                 let gj = GpuJoint::new(ctx, j, demux.frame(), unmix.output(), t.gains)?;
                 let c = recon.unmixer.channels();
@@ -208,5 +209,26 @@ impl GpuReconstructor {
     /// An empty output cube of the right size for `run_into`.
     pub fn output_cube(&self) -> Cube {
         Cube::zeros(self.demux.w, self.demux.h, self.unmix.bands)
+    }
+}
+
+/// The GPU runs the joint method's TV prior with a fixed λ and ω = 1; the plug-and-play prior,
+/// the discrepancy rule and noise weights are CPU-only and refused here with the key to change.
+fn gpu_joint_supported(j: &Joint, recon: &Reconstructor) -> Result<()> {
+    let cfg = j.tables().config;
+    let unsupported = if cfg.prior != Prior::Tv {
+        Some("reconstruct.joint.prior = \"pnp\"")
+    } else if cfg.weight_rule != WeightRule::Fixed {
+        Some("reconstruct.joint.weight_rule = \"discrepancy\"")
+    } else if recon.joint_noise().is_some() {
+        Some("reconstruct.joint.noise_weights = true")
+    } else {
+        None
+    };
+    match unsupported {
+        Some(what) => Err(GpuError::Unsupported(format!(
+            "{what} runs on the CPU only (the GPU runs the TV prior with a fixed λ and uniform weights)"
+        ))),
+        None => Ok(()),
     }
 }

@@ -128,3 +128,33 @@ fn joint_dead_leaves_with_timing() {
         1e-4,
     );
 }
+
+/// The joint settings that run on the CPU only are refused by name, not run differently.
+#[test]
+fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
+    let Some(ctx) = common::context() else { return };
+    let lib = Library::default_root();
+    let materials = Materials::load(&lib).unwrap();
+    for (keys, named) in [
+        ("prior = \"pnp\"\n", "reconstruct.joint.prior"),
+        ("noise_weights = true\n", "reconstruct.joint.noise_weights"),
+        (
+            "noise_weights = true\nweight_rule = \"discrepancy\"\n",
+            "reconstruct.joint.weight_rule",
+        ),
+    ] {
+        let toml = format!(
+            "[scene]\nsize = [32, 32]\n[rig.sensor]\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 2\n{keys}"
+        );
+        let exp = Experiment::from_toml(&toml, "test.toml").unwrap();
+        let rig = Rig::build(&exp, &lib, &materials).unwrap();
+        let (sim, _) = Pipeline::build(&exp, &rig, &materials)
+            .unwrap()
+            .run()
+            .unwrap();
+        let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+        let e = GpuReconstructor::new(&ctx, &recon).err().map(|e| e.to_string());
+        let e = e.unwrap_or_default();
+        assert!(e.contains(named) && e.contains("CPU only"), "{keys}: {e}");
+    }
+}
