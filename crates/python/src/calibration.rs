@@ -62,7 +62,12 @@ pub fn from_dict(d: &Bound<'_, PyAny>, width: usize, height: usize) -> PyResult<
             ))
         }
     };
-    Ok(CalibrationFrames::single(dark, flat, patterns, SOURCE.into()))
+    Ok(CalibrationFrames::single(
+        dark,
+        flat,
+        patterns,
+        SOURCE.into(),
+    ))
 }
 
 /// The pattern frames: a list or tuple of (h, w) arrays, or one (n, h, w) array.
