@@ -244,9 +244,7 @@ pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
     let h = (2 * qy_max + 1) as usize;
     let cols = (qx_max + 1) as usize;
     let kxs: Vec<i64> = bins.iter().map(|b| b.kx).collect();
-    // Many small tasks: the pairs crowd into a few columns of q (0 and the carrier harmonics),
-    // and two threads stay busy only if no task holds most of them.
-    let per_task = cols.div_ceil(512).max(1);
+    let per_task = cols.div_ceil(64).max(1);
     let mut s0 = vec![Complex64::default(); cols * h];
     let mut s1 = vec![Complex64::default(); cols * h];
     s0.par_chunks_mut(per_task * h)
@@ -255,15 +253,10 @@ pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
         .for_each(|(t, (c0, c1))| {
             let q0 = (t * per_task) as i64;
             let q1 = q0 + (c0.len() / h) as i64;
-            let (mut lo, mut hi) = (0, 0);
             for a in bins {
-                // b with q0 ≤ kx_a − kx_b < q1: both ends only move up as kx_a grows.
-                while lo < kxs.len() && kxs[lo] <= a.kx - q1 {
-                    lo += 1;
-                }
-                while hi < kxs.len() && kxs[hi] <= a.kx - q0 {
-                    hi += 1;
-                }
+                // b with q0 ≤ kx_a − kx_b < q1.
+                let lo = kxs.partition_point(|&k| k <= a.kx - q1);
+                let hi = kxs.partition_point(|&k| k <= a.kx - q0);
                 for b in &bins[lo..hi] {
                     let g = overlap(a, b);
                     if g == [0.0; 2] {
