@@ -341,7 +341,7 @@ impl Reconstructor {
     /// first half, without de-aliasing).
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
         let z = self.demux.run(&self.calibration.linearise(frame)?)?;
-        self.into_channels(z)
+        self.to_channels_owned(z)
     }
 
     /// α = H⁻¹Fᵀx per pixel: the unmixing without its constraint (the joint method's seed).
@@ -361,7 +361,7 @@ impl Reconstructor {
 
     /// [`Reconstructor::to_channels`] of a z no longer needed: returned as is (not copied)
     /// without a correction.
-    fn into_channels(&self, z: Cube) -> Result<Cube> {
+    fn to_channels_owned(&self, z: Cube) -> Result<Cube> {
         match &self.demix {
             Some(m) => z.mix(m),
             None => Ok(z),
