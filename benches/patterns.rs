@@ -1,9 +1,12 @@
 //! Generating and imaging the six 768 × 768 patterns of the prototype rig (done once per rig):
 //! Floyd–Steinberg and in-band-feedback dithering, coherent 4f filtering of each wheel band
-//! (streaks, exact over λ) and of a 532 nm line, lens and pixels.
+//! (streaks, exact over λ) and of a 532 nm line, lens and pixels; and the whole forward model
+//! of `scenes/full-rig.toml` at 768 × 768 (scene to sensor, every optical stage), whose stage
+//! times are printed once.
 use criterion::{criterion_group, criterion_main, Criterion};
 use specmux_core::spectral::Library;
 use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::Pipeline;
 use specmux_twin::optics::dither::DitherMethod;
 use specmux_twin::optics::fourier_filter::Light;
 use specmux_twin::optics::imaging::imaged_patterns;
@@ -39,5 +42,22 @@ fn patterns(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, patterns);
+/// `specmux simulate scenes/full-rig.toml` without writing files: the forward pipeline's run.
+fn full_rig(c: &mut Criterion) {
+    eprintln!("rayon threads: {}", rayon::current_num_threads());
+    let lib = Library::default_root();
+    let materials = Materials::load(&lib).expect("spectra/ is readable");
+    let exp = Experiment::load(std::path::Path::new("scenes/full-rig.toml")).expect("full rig");
+    let rig = Rig::build(&exp, &lib, &materials).expect("full rig");
+    let pipeline = Pipeline::build(&exp, &rig, &materials).expect("full-rig pipeline");
+    for t in pipeline.run().expect("a forward run").1 {
+        eprintln!("{t:?}");
+    }
+    let mut g = c.benchmark_group("forward");
+    g.sample_size(10);
+    g.bench_function("full_rig_768", |b| b.iter(|| pipeline.run().unwrap()));
+    g.finish();
+}
+
+criterion_group!(benches, patterns, full_rig);
 criterion_main!(benches);

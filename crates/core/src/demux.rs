@@ -223,6 +223,20 @@ impl Demux {
         gain: Complex64,
         offset: [f64; 2],
     ) -> Vec<f32> {
+        let mut out = vec![0.0f32; self.fft.w * self.fft.h];
+        self.extract_into(spec, win, gain, offset, &mut out);
+        out
+    }
+
+    /// [`Demux::extract`] written into `out` (one plane of the frame's size).
+    fn extract_into(
+        &self,
+        spec: &HalfSpectrum,
+        win: &Window,
+        gain: Complex64,
+        offset: [f64; 2],
+        out: &mut [f32],
+    ) {
         let inv_gain = Complex32::new((1.0 / gain).re as f32, (1.0 / gain).im as f32);
         let z = |dx: i64, dy: i64| -> Complex32 {
             if !win.contains(dx, dy) {
@@ -238,26 +252,19 @@ impl Demux {
             }
         };
         // IFFT(Z) = c2r(H₁) + i·c2r(H₂), H₁ = (Z(k) + Z*(−k))/2, H₂ = (Z(k) − Z*(−k))/2i.
-        let re = self
-            .fft
-            .inverse(&self.hermitian(win, spec.h, |dx, dy| (z(dx, dy) + z(-dx, -dy).conj()) * 0.5));
+        let re = self.hermitian(win, spec.h, |dx, dy| (z(dx, dy) + z(-dx, -dy).conj()) * 0.5);
+        self.fft.inverse_into(re, out);
         if offset == [0.0, 0.0] {
-            return re;
+            return;
         }
-        let im = self.fft.inverse(&self.hermitian(win, spec.h, |dx, dy| {
-            (z(dx, dy) - z(-dx, -dy).conj()) * Complex32::new(0.0, -0.5)
-        }));
-        let tau = std::f64::consts::TAU;
-        let w = self.fft.w;
-        re.iter()
-            .zip(&im)
-            .enumerate()
-            .map(|(p, (a, b))| {
-                let theta = tau * (offset[0] * (p % w) as f64 + offset[1] * (p / w) as f64);
-                let (s, c) = theta.sin_cos();
-                (*a as f64 * c + *b as f64 * s) as f32
-            })
-            .collect()
+        let mut im = vec![0.0f32; out.len()];
+        self.fft.inverse_into(
+            self.hermitian(win, spec.h, |dx, dy| {
+                (z(dx, dy) - z(-dx, -dy).conj()) * Complex32::new(0.0, -0.5)
+            }),
+            &mut im,
+        );
+        demodulate(out, &im, offset, self.fft.w);
     }
 
     /// The half plane kx ≥ 0 (column-major, as the c2r inverse takes it) of a Hermitian
@@ -301,9 +308,7 @@ impl Demux {
             .collect::<Vec<_>>()
             .into_par_iter()
             .zip(self.windows.par_iter().zip(&self.gains).zip(&self.offsets))
-            .for_each(|(plane, ((win, g), o))| {
-                plane.copy_from_slice(&self.extract(&spec, win, *g, *o))
-            });
+            .for_each(|(plane, ((win, g), o))| self.extract_into(&spec, win, *g, *o, plane));
         Ok(out)
     }
 
@@ -313,11 +318,30 @@ impl Demux {
         let mut out = Cube::zeros(channels.width, channels.height, channels.planes);
         for k in 0..channels.planes {
             let spec = self.spectrum(channels.plane(k));
-            let lp = self.extract(&spec, &self.dc, Complex64::new(1.0, 0.0), [0.0, 0.0]);
-            out.plane_mut(k).copy_from_slice(&lp);
+            let one = Complex64::new(1.0, 0.0);
+            self.extract_into(&spec, &self.dc, one, [0.0, 0.0], out.plane_mut(k));
         }
         out
     }
+}
+
+/// re ← Re(e^{−2πi δ·p}·(re + i·im)) = re·cos θ + im·sin θ, θ = 2π(δx·x + δy·y), the phasor
+/// e^{iθ} formed as the product of a per-column and a per-row one (no sin/cos per pixel).
+fn demodulate(re: &mut [f32], im: &[f32], offset: [f64; 2], w: usize) {
+    let tau = std::f64::consts::TAU;
+    let ex: Vec<Complex64> = (0..w)
+        .map(|x| Complex64::from_polar(1.0, tau * offset[0] * x as f64))
+        .collect();
+    re.par_chunks_mut(w)
+        .zip(im.par_chunks(w))
+        .enumerate()
+        .for_each(|(y, (re, im))| {
+            let ey = Complex64::from_polar(1.0, tau * offset[1] * y as f64);
+            for ((a, &b), e) in re.iter_mut().zip(im).zip(&ex) {
+                let p = e * ey;
+                *a = (*a as f64 * p.re + b as f64 * p.im) as f32;
+            }
+        });
 }
 
 #[cfg(test)]
@@ -484,6 +508,35 @@ mod tests {
             let m = window_weight(shape, order, wx, wy, -dx, -dy);
             if m > 0.0 && v > 0.0 {
                 proptest::prop_assert!((v - m).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn demodulation_by_hand() {
+        // δ = (¼, ½) cycles/px: θ(x, y) = π/2·x + π·y, so re·cos θ + im·sin θ at (1, 0) is im,
+        // at (2, 0) −re, at (0, 1) −re, at (1, 1) −im.
+        let (mut re, im) = (vec![3.0f32; 6], vec![5.0f32; 6]);
+        demodulate(&mut re, &im, [0.25, 0.5], 3);
+        let want = [3.0, 5.0, -3.0, -3.0, -5.0, 3.0];
+        for (g, w) in re.iter().zip(want) {
+            assert!((g - w).abs() < 1e-6, "{re:?}");
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn separable_phasors_match_the_direct_angle(
+            fx in -0.02f64..0.02, fy in -0.02f64..0.02, w in 1usize..50, h in 1usize..40,
+        ) {
+            let re: Vec<f32> = (0..w * h).map(|i| ((i * 37) % 17) as f32 - 8.0).collect();
+            let im: Vec<f32> = (0..w * h).map(|i| ((i * 11) % 13) as f32 - 6.0).collect();
+            let mut got = re.clone();
+            demodulate(&mut got, &im, [fx, fy], w);
+            for p in 0..w * h {
+                let t = std::f64::consts::TAU * (fx * (p % w) as f64 + fy * (p / w) as f64);
+                let want = re[p] as f64 * t.cos() + im[p] as f64 * t.sin();
+                proptest::prop_assert!((got[p] as f64 - want).abs() < 1e-5, "{p}: {} vs {want}", got[p]);
             }
         }
     }

@@ -87,36 +87,39 @@ impl Fft2 {
     /// zero), normalised by 1/(w·h) so that `inverse(forward(x)) = x`. The Hermitian symmetry of
     /// the kx = 0 (and Nyquist) column is assumed; their imaginary parts are discarded.
     pub fn inverse(&self, cols: &[Complex32]) -> Vec<f32> {
+        let mut out = vec![0.0f32; self.w * self.h];
+        self.inverse_into(cols.to_vec(), &mut out);
+        out
+    }
+
+    /// [`Fft2::inverse`] written into `out` (w·h values), transforming the columns in place:
+    /// each row's c2r input is gathered from the columns, so nothing is copied or transposed.
+    pub fn inverse_into(&self, mut cols: Vec<Complex32>, out: &mut [f32]) {
         let (w, h, cw) = (self.w, self.h, self.w / 2 + 1);
+        assert_eq!(out.len(), w * h, "output size does not match the plan");
         let kx_end = (cols.len() / h).min(cw);
-        let mut cols = cols[..kx_end * h].to_vec();
+        cols.truncate(kx_end * h);
         cols.par_chunks_mut(h).for_each_init(
             || vec![Complex32::default(); self.col_inv.get_inplace_scratch_len()],
             |scratch, col| self.col_inv.process_with_scratch(col, scratch),
         );
-        // Rows of the (y, kx) matrix, contiguous, for the row pass.
-        let rows = transpose(&cols, kx_end, h);
         let norm = 1.0 / (w * h) as f32;
-        let mut out = vec![0.0f32; w * h];
-        out.par_chunks_mut(w)
-            .zip(rows.par_chunks(kx_end))
-            .for_each_init(
-                || (self.c2r.make_input_vec(), self.c2r.make_scratch_vec()),
-                |(inp, scratch), (row, spec)| {
-                    for (v, s) in inp.iter_mut().zip(spec) {
-                        *v = s * norm;
-                    }
-                    inp[kx_end..].fill(Complex32::default());
-                    inp[0].im = 0.0;
-                    if w % 2 == 0 {
-                        inp[cw - 1].im = 0.0;
-                    }
-                    self.c2r
-                        .process_with_scratch(inp, row, scratch)
-                        .expect("imaginary parts of DC and Nyquist were zeroed");
-                },
-            );
-        out
+        out.par_chunks_mut(w).enumerate().for_each_init(
+            || (self.c2r.make_input_vec(), self.c2r.make_scratch_vec()),
+            |(inp, scratch), (y, row)| {
+                for (kx, v) in inp[..kx_end].iter_mut().enumerate() {
+                    *v = cols[kx * h + y] * norm;
+                }
+                inp[kx_end..].fill(Complex32::default());
+                inp[0].im = 0.0;
+                if w % 2 == 0 {
+                    inp[cw - 1].im = 0.0;
+                }
+                self.c2r
+                    .process_with_scratch(inp, row, scratch)
+                    .expect("imaginary parts of DC and Nyquist were zeroed");
+            },
+        );
     }
 }
 

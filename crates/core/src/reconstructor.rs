@@ -362,7 +362,7 @@ impl Reconstructor {
     /// first half, without de-aliasing).
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
         let z = self.demux.run(&self.calibration.linearise(frame)?)?;
-        self.to_channels(&z)
+        self.to_channels_owned(z)
     }
 
     /// α = H⁻¹Fᵀx per pixel: the unmixing without its constraint (the joint method's seed).
@@ -377,6 +377,15 @@ impl Reconstructor {
         match &self.demix {
             Some(m) => z.mix(m),
             None => Ok(z.clone()),
+        }
+    }
+
+    /// [`Reconstructor::to_channels`] of a z no longer needed: returned as is (not copied)
+    /// without a correction.
+    fn to_channels_owned(&self, z: Cube) -> Result<Cube> {
+        match &self.demix {
+            Some(m) => z.mix(m),
+            None => Ok(z),
         }
     }
 

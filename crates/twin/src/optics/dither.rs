@@ -183,29 +183,43 @@ pub fn dither(
     }
 }
 
-/// The in-band part of an image: IFFT(passband · FFT(img)), and the energy Σ|passband · FFT|².
-fn band_pass(fft: &Fft2, img: &[f32], passband: Passband) -> (Vec<f32>, f64) {
+/// The passband at every bin of a `w × h` half spectrum (`HalfSpectrum`'s column-major
+/// order), evaluated once so that repeated band passes only multiply.
+fn passband_weights(w: usize, h: usize, passband: Passband) -> Vec<f32> {
+    let mut weights = vec![0.0f32; (w / 2 + 1) * h];
+    weights.par_chunks_mut(h).enumerate().for_each(|(kx, col)| {
+        let fx = kx as f64 / w as f64;
+        for (ky, v) in col.iter_mut().enumerate() {
+            *v = passband(fx, signed_bin(ky, h) as f64 / h as f64) as f32;
+        }
+    });
+    weights
+}
+
+/// The in-band part of an image: IFFT(P · FFT(img)), and the energy Σ|P · FFT|², P given by
+/// its [`passband_weights`].
+fn band_pass(fft: &Fft2, img: &[f32], weights: &[f32]) -> (Vec<f32>, f64) {
     let (w, h) = (fft.w, fft.h);
     let mut spec = fft.forward(img);
     let energy: f64 = spec
         .data
         .par_chunks_mut(h)
+        .zip(weights.par_chunks(h))
         .enumerate()
-        .map(|(kx, col)| {
-            let fx = kx as f64 / w as f64;
+        .map(|(kx, (col, p))| {
             // Columns 1..w/2 (excluding a Nyquist column) stand for themselves and their mirror.
             let mult = if kx == 0 || 2 * kx == w { 1.0 } else { 2.0 };
             let mut e = 0.0;
-            for (ky, v) in col.iter_mut().enumerate() {
-                let fy = signed_bin(ky, h) as f64 / h as f64;
-                let p = passband(fx, fy) as f32;
+            for (v, &p) in col.iter_mut().zip(p) {
                 *v *= p;
                 e += mult * v.norm_sqr() as f64;
             }
             e
         })
         .sum();
-    (fft.inverse(&spec.data), energy)
+    let mut out = vec![0.0f32; w * h];
+    fft.inverse_into(spec.data, &mut out);
+    (out, energy)
 }
 
 /// Bin index in −n/2..n/2 for a stored index 0..n.
@@ -219,7 +233,7 @@ pub(crate) fn signed_bin(k: usize, n: usize) -> i64 {
 
 /// Σ|P·FFT(img)|² over the whole frequency plane (unnormalised DFT).
 pub fn in_band_energy(img: &[f32], w: usize, h: usize, passband: Passband) -> f64 {
-    band_pass(&Fft2::new(w, h), img, passband).1
+    band_pass(&Fft2::new(w, h), img, &passband_weights(w, h, passband)).1
 }
 
 /// Relative in-band error ‖P·(B − T)‖ / ‖P·T‖: the quantisation error that the Fourier filter
@@ -251,11 +265,12 @@ fn in_band_feedback(
     iterations: usize,
 ) -> Vec<f32> {
     let fft = Fft2::new(w, h);
+    let weights = passband_weights(w, h, passband);
     let mut b = error_diffusion(target, w, h, &FLOYD_STEINBERG);
     let mut best: Option<(f64, Vec<f32>)> = None;
     for it in 0..=iterations {
         let diff: Vec<f32> = b.iter().zip(target).map(|(b, t)| b - t).collect();
-        let (err_in_band, energy) = band_pass(&fft, &diff, passband);
+        let (err_in_band, energy) = band_pass(&fft, &diff, &weights);
         if best.as_ref().map_or(true, |(e, _)| energy < *e) {
             best = Some((energy, b.clone()));
         }

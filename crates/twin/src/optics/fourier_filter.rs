@@ -197,7 +197,21 @@ impl Opening {
         } else {
             0.0
         };
-        (x - self.a.0 - t * dx).hypot(y - self.a.1 - t * dy) <= r
+        within(x - self.a.0 - t * dx, y - self.a.1 - t * dy, r)
+    }
+}
+
+/// hypot(x, y) ≤ r, decided from x² + y² away from the circle (no square root) and by hypot
+/// itself within 1e-9 of it, so the answer is hypot's to the last bit.
+#[inline]
+fn within(x: f64, y: f64, r: f64) -> bool {
+    let (d2, r2) = (x * x + y * y, r * r);
+    if d2 < r2 * (1.0 - 1e-9) {
+        true
+    } else if d2 > r2 * (1.0 + 1e-9) {
+        false
+    } else {
+        x.hypot(y) <= r
     }
 }
 
@@ -309,11 +323,18 @@ impl Mask {
     }
 
     /// Transmittance seen by a bin of the mirror grid, which stands for f and its replicas f + n.
+    /// Replicas outside the openings' extent (with a margin for rounding) are passed over: no
+    /// opening reaches them.
     pub fn at_periodic(&self, fx: f64, fy: f64) -> f64 {
+        let (ex, ey) = self.extent();
+        let (ex, ey) = (ex * (1.0 + 1e-9) + 1e-12, ey * (1.0 + 1e-9) + 1e-12);
         let mut v = 0.0f64;
         for nx in -1..=1 {
             for ny in -1..=1 {
-                v = v.max(self.at(fx + nx as f64, fy + ny as f64));
+                let (x, y) = (fx + nx as f64, fy + ny as f64);
+                if x.abs() <= ex && y.abs() <= ey {
+                    v = v.max(self.at(x, y));
+                }
             }
         }
         v
@@ -394,6 +415,44 @@ mod tests {
             }
         }
         assert_eq!(otf.at(61, 0)[0], Complex64::default(), "beyond the cutoff");
+    }
+
+    #[test]
+    fn within_is_hypot_by_hand_and_on_the_circle() {
+        // (3, 4) lies at 5: inside a radius of 5, outside 5 − 1 ulp; (0, 0) in a radius of 0.
+        assert!(within(3.0, 4.0, 5.0) && !within(3.0, 4.0, f64::from_bits(5.0f64.to_bits() - 1)));
+        assert!(within(0.0, 0.0, 0.0) && !within(f64::NAN, 0.0, 1.0));
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn within_agrees_with_hypot(x in -2.0f64..2.0, y in -2.0f64..2.0, scale in 0.5f64..1.5) {
+            // Radii at, just off and far from the point's distance.
+            let d = x.hypot(y);
+            // One ulp either side (d > 0 but for a null draw, where d itself serves).
+            let (up, down) = (f64::from_bits(d.to_bits() + 1), f64::from_bits(d.to_bits().max(1) - 1));
+            for r in [d, up, down, d * scale] {
+                proptest::prop_assert_eq!(within(x, y, r), x.hypot(y) <= r);
+            }
+        }
+
+        #[test]
+        fn periodic_mask_skips_only_replicas_it_cannot_reach(
+            fx in -0.5f64..0.5, fy in -0.5f64..0.5, cx in -0.6f64..0.6, cy in -0.6f64..0.6,
+            r in 0.001f64..0.3, streak in 0.0f64..0.2, square in proptest::bool::ANY,
+        ) {
+            let o = Opening { a: (cx, cy), b: (cx + streak, cy - streak) };
+            let m = Mask {
+                openings: vec![Opening { a: (0.0, 0.0), b: (0.0, 0.0) }, o, o.scaled(-1.0)],
+                radius: r,
+                square,
+            };
+            let all = (-1..=1)
+                .flat_map(|nx| (-1..=1).map(move |ny| (nx as f64, ny as f64)))
+                .map(|(nx, ny)| m.at(fx + nx, fy + ny))
+                .fold(0.0f64, f64::max);
+            proptest::prop_assert_eq!(m.at_periodic(fx, fy), all);
+        }
     }
 
     #[test]
