@@ -153,7 +153,9 @@ fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
             .run()
             .unwrap();
         let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
-        let e = GpuReconstructor::new(&ctx, &recon).err().map(|e| e.to_string());
+        let e = GpuReconstructor::new(&ctx, &recon)
+            .err()
+            .map(|e| e.to_string());
         let e = e.unwrap_or_default();
         assert!(e.contains(named) && e.contains("CPU only"), "{keys}: {e}");
     }
