@@ -87,6 +87,7 @@ fn solver_with(iterations: usize, eta: f64) -> Joint {
         iterations,
         tv_weight: 0.05,
         step_ratio: 1.0,
+        ..JointConfig::default()
     };
     Joint::new(&patterns(), &f, &b, eta, &cfg, "t.toml").unwrap()
 }

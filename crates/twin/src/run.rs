@@ -442,16 +442,22 @@ impl RunReport {
             .collect::<Vec<_>>()
             .join(", ");
         s += &format!(
-            "\nbasis J={}: held-out RMSE {:.4} (train {:.4}), energy {:.5}\nunmix: {} of {} pixels hit the non-negativity bound\nreconstructor set-up {:.4}s, reconstruction {:.4}s, total {:.2}s\n",
+            "\nbasis J={}: held-out RMSE {:.4} (train {:.4}), energy {:.5}\n",
             self.basis.vectors,
             self.basis.held_out.rmse,
             self.basis.train.rmse,
             self.basis.held_out.energy_captured,
-            self.unmix.constrained_pixels,
-            self.unmix.pixels,
-            self.setup_seconds,
-            self.reconstruction_seconds,
-            self.total_seconds
+        );
+        // The joint method fits α from the frame: no per-pixel unmixing ran to count.
+        if self.unmix.pixels > 0 {
+            s += &format!(
+                "unmix: {} of {} pixels hit the non-negativity bound\n",
+                self.unmix.constrained_pixels, self.unmix.pixels
+            );
+        }
+        s += &format!(
+            "reconstructor set-up {:.4}s, reconstruction {:.4}s, total {:.2}s\n",
+            self.setup_seconds, self.reconstruction_seconds, self.total_seconds
         );
         if let Some(a) = &self.auto {
             s += &format!("auto: {}\n", a.reason);
