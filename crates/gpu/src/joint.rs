@@ -68,6 +68,11 @@ pub struct GpuJoint {
     clip: Launch,
     channels: GpuMix,
     b: Buffers,
+    /// The shader's parameters and their uniform buffer (λ per |y| is rewritten with ω's mean).
+    params: Params,
+    uniform: wgpu::Buffer,
+    /// tv_weight·mean‖a‖: λ per mean|y| before ω's mean scales it, as on the CPU.
+    lambda_per_y: f64,
     /// The objective list, the scalars' header, the extremes and the counter, for the host.
     staging: wgpu::Buffer,
 }
@@ -94,7 +99,8 @@ impl GpuJoint {
             )));
         }
         let b = Buffers::new(ctx, joint);
-        let uniform = ctx.uniform("joint params", &params(joint));
+        let params = params(joint);
+        let uniform = ctx.uniform("joint params", &params);
         let module = ctx.module("joint", &source(j, t.padded_bands));
         let pixels = linear_groups(npx, WORKGROUP);
         let launch = |entry, bound: &[(u32, &wgpu::Buffer)], groups| {
@@ -157,6 +163,9 @@ impl GpuJoint {
                 b.objective.size() + 4 * SCALARS as u64 + 12,
             ),
             b,
+            params,
+            uniform: uniform.clone(),
+            lambda_per_y: t.config.tv_weight * t.mean_a_norm,
         };
         joint.write_weights(ctx, &vec![1.0; npx]);
         Ok(joint)
@@ -180,10 +189,18 @@ impl GpuJoint {
         Ok(())
     }
 
+    /// ω into its table, and λ per |y| times mean ω (the CPU's λ = tv_weight·mean|y|·mean‖a‖·mean ω).
     fn write_weights(&self, ctx: &GpuContext, omega: &[f32]) {
         let at = ((self.j + 3) * self.npx * 4) as u64;
         ctx.queue
             .write_buffer(&self.b.tab, at, bytemuck::cast_slice(omega));
+        let mean = omega.iter().map(|&v| v as f64).sum::<f64>() / omega.len() as f64;
+        let params = Params {
+            lambda_per_y: (self.lambda_per_y * mean) as f32,
+            ..self.params
+        };
+        ctx.queue
+            .write_buffer(&self.uniform, 0, bytemuck::bytes_of(&params));
     }
 
     /// The state buffer: its first J planes are α (the seed goes there before `encode`).

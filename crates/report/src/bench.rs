@@ -15,6 +15,7 @@ use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::gap::GapConfig;
 use specmux_core::gap::Method;
+use specmux_core::joint::Prior;
 use specmux_core::metrics;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
@@ -64,6 +65,8 @@ pub struct Setting {
     pub iterations: usize,
     pub crop: f64,
     pub window: WindowShape,
+    /// The joint method's prior (TV or plug-and-play); TV for the other methods.
+    pub prior: Prior,
 }
 
 impl Setting {
@@ -73,6 +76,7 @@ impl Setting {
             Method::Fourier => "fourier".to_string(),
             Method::Gap => format!("gap {} it", self.iterations),
             Method::GapTv => format!("gap-tv {} it", self.iterations),
+            Method::Joint if self.prior == Prior::Pnp => format!("pnp {} it", self.iterations),
             Method::Joint => format!("joint {} it", self.iterations),
             Method::Auto => "auto".to_string(),
         };
@@ -87,7 +91,8 @@ impl Setting {
 
 /// The default grid: Fourier at three crops × three window shapes, GAP and GAP-TV at
 /// 1, 2, 5, 10, 20, 50 iterations (crop 0.25, square), both at 20 iterations with the other
-/// two windows, and the joint reconstruction at 10, 20, 40, 80 iterations.
+/// two windows, and the joint reconstruction with its TV and its plug-and-play prior at 10, 20,
+/// 40, 80 iterations.
 pub fn default_grid() -> Vec<Setting> {
     let shapes = [
         WindowShape::Square,
@@ -102,6 +107,7 @@ pub fn default_grid() -> Vec<Setting> {
                 iterations: 0,
                 crop,
                 window,
+                prior: Prior::Tv,
             });
         }
     }
@@ -112,6 +118,7 @@ pub fn default_grid() -> Vec<Setting> {
                 iterations,
                 crop: 0.25,
                 window: WindowShape::Square,
+                prior: Prior::Tv,
             });
         }
         for window in &shapes[1..] {
@@ -120,16 +127,20 @@ pub fn default_grid() -> Vec<Setting> {
                 iterations: 20,
                 crop: 0.25,
                 window: *window,
+                prior: Prior::Tv,
             });
         }
     }
-    for iterations in [10, 20, 40, 80] {
-        g.push(Setting {
-            method: Method::Joint,
-            iterations,
-            crop: 0.25,
-            window: WindowShape::Square,
-        });
+    for prior in [Prior::Tv, Prior::Pnp] {
+        for iterations in [10, 20, 40, 80] {
+            g.push(Setting {
+                method: Method::Joint,
+                iterations,
+                crop: 0.25,
+                window: WindowShape::Square,
+                prior,
+            });
+        }
     }
     g
 }
@@ -347,7 +358,10 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
     exp.reconstruct.gap.method = s.method;
     match s.method {
         Method::Fourier => {}
-        Method::Joint => exp.reconstruct.joint.iterations = s.iterations,
+        Method::Joint => {
+            exp.reconstruct.joint.iterations = s.iterations;
+            exp.reconstruct.joint.prior = s.prior;
+        }
         _ => exp.reconstruct.gap.iterations = s.iterations,
     }
     exp.validate()?;
@@ -486,7 +500,11 @@ pub fn work_precision_plot(
     // What `auto` would pick from these very measurements (the committed table is a copy).
     let entries: Vec<auto::Entry> = ok
         .iter()
-        .filter(|r| r.setting.crop == 0.25 && r.setting.window == WindowShape::Square)
+        .filter(|r| {
+            r.setting.crop == 0.25
+                && r.setting.window == WindowShape::Square
+                && r.setting.prior == Prior::Tv
+        })
         .map(|r| auto::Entry {
             method: r.setting.method,
             iterations: r.setting.iterations,
@@ -512,15 +530,23 @@ pub fn work_precision_plot(
             .y_desc("final cube PSNR, dB")
             .draw()
             .map_err(|x| e(&x))?;
-        for (c, method, name) in [
-            (0, Method::Fourier, "fourier (crops, windows)"),
-            (1, Method::Gap, "gap"),
-            (2, Method::GapTv, "gap-tv"),
-            (3, Method::Joint, "joint (PDHG, vectorial TV)"),
+        for (c, method, prior, name) in [
+            (0, Method::Fourier, Prior::Tv, "fourier (crops, windows)"),
+            (1, Method::Gap, Prior::Tv, "gap"),
+            (2, Method::GapTv, Prior::Tv, "gap-tv"),
+            (3, Method::Joint, Prior::Tv, "joint (PDHG, vectorial TV)"),
+            (
+                4,
+                Method::Joint,
+                Prior::Pnp,
+                "joint plug-and-play (ADMM, guided smoother)",
+            ),
         ] {
             let color = Palette99::pick(c).to_rgba();
-            let of_method: Vec<&&BenchRow> =
-                ok.iter().filter(|r| r.setting.method == method).collect();
+            let of_method: Vec<&&BenchRow> = ok
+                .iter()
+                .filter(|r| r.setting.method == method && r.setting.prior == prior)
+                .collect();
             let pts: Vec<(f64, f64)> = of_method
                 .iter()
                 .map(|r| (r.seconds.ln(), r.psnr_db))
@@ -553,7 +579,8 @@ pub fn work_precision_plot(
         let picked = ok.iter().filter(|r| {
             auto.as_ref().is_some_and(|a| {
                 r.setting.method == a.method && r.setting.iterations == a.iterations
-            }) && r.setting.crop == 0.25
+            }) && r.setting.prior == Prior::Tv
+                && r.setting.crop == 0.25
                 && r.setting.window == WindowShape::Square
         });
         chart
@@ -872,22 +899,32 @@ mod tests {
                 iterations: 0,
                 crop: 0.25,
                 window: WindowShape::Circular,
+                prior: Prior::Tv,
             },
             Setting {
                 method: Method::Gap,
                 iterations: 2,
                 crop: 0.25,
                 window: WindowShape::Square,
+                prior: Prior::Tv,
             },
             Setting {
                 method: Method::Joint,
                 iterations: 30,
                 crop: 0.25,
                 window: WindowShape::Square,
+                prior: Prior::Tv,
+            },
+            Setting {
+                method: Method::Joint,
+                iterations: 30,
+                crop: 0.25,
+                window: WindowShape::Square,
+                prior: Prior::Pnp,
             },
         ];
         let rows = work_precision(&sim, &grid, 2).unwrap();
-        assert_eq!(rows.len(), 3);
+        assert_eq!(rows.len(), 4);
         // The joint method beats the Fourier estimate it starts from, through the Reconstructor.
         assert!(rows[2].psnr_db > rows[0].psnr_db + 1.0, "{rows:?}");
         for r in &rows {
@@ -911,7 +948,14 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("overlap"), "{e}");
         assert!(rows.iter().all(|r| r.device == "cpu"));
-        assert!(work_precision_markdown(&rows).contains("| gap 2 it, crop 0.25 square | cpu |"));
+        // The plug-and-play prior is a row of its own, labelled so, and beats the Fourier estimate.
+        assert!(rows[3].psnr_db > rows[0].psnr_db + 1.0, "{rows:?}");
+        let table = work_precision_markdown(&rows);
+        assert!(table.contains("| gap 2 it, crop 0.25 square | cpu |"));
+        assert!(
+            table.contains("| pnp 30 it, crop 0.25 square | cpu |"),
+            "{table}"
+        );
     }
 
     #[cfg(not(feature = "gpu"))]
@@ -946,6 +990,7 @@ mod tests {
             iterations,
             crop: 0.25,
             window: WindowShape::Square,
+            prior: Prior::Tv,
         };
         let grid = [
             setting(Method::Fourier, 0),
