@@ -93,7 +93,8 @@ impl GpuContext {
             })
     }
 
-    /// A uniform buffer holding `value` (a kernel's parameters, fixed at plan time).
+    /// A uniform buffer holding `value` (a kernel's parameters; writable, so a frame-level
+    /// parameter such as the joint method's λ per |y| can be rewritten).
     pub fn uniform<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
         self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
