@@ -567,14 +567,20 @@ pub fn work_precision_plot(
             .map_err(|x| e(&x))?
             .label("Pareto front (labelled)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+        let labels: Vec<String> = front
+            .iter()
+            .map(|r| r.label.replace(", crop 0.25 square", ""))
+            .collect();
+        let points: Vec<(f64, f64)> = front.iter().map(|r| (r.seconds.ln(), r.psnr_db)).collect();
+        let spans = ((t1 * 3.25 / t0).ln(), p1 - p0 + 2.0 * pad);
+        let spots = label_spots(&points, &labels, spans, pad);
         chart
-            .draw_series(front.iter().map(|r| {
-                Text::new(
-                    r.label.replace(", crop 0.25 square", ""),
-                    (r.seconds.ln() + 0.04, r.psnr_db - 0.15 * pad),
-                    ("sans-serif", 13),
-                )
-            }))
+            .draw_series(
+                labels
+                    .iter()
+                    .zip(spots)
+                    .map(|(l, at)| Text::new(l.clone(), at, ("sans-serif", 13))),
+            )
             .map_err(|x| e(&x))?;
         let picked = ok.iter().filter(|r| {
             auto.as_ref().is_some_and(|a| {
@@ -601,6 +607,38 @@ pub fn work_precision_plot(
             .draw()
             .map_err(|x| e(&x))
     })
+}
+
+/// Where each Pareto label goes (its top-left corner): right of and just below its point, or
+/// above the point, or below the label before it, where the first choice would cover a label
+/// already placed. Sizes are estimated from the 13-px font on the plot's ~880 × 560 px area
+/// spanning `spans` (ln seconds, dB).
+fn label_spots(
+    points: &[(f64, f64)],
+    labels: &[String],
+    spans: (f64, f64),
+    pad: f64,
+) -> Vec<(f64, f64)> {
+    let h = 16.0 / 560.0 * spans.1;
+    let mut placed: Vec<(f64, f64, f64)> = Vec::new();
+    for (&(x, y), label) in points.iter().zip(labels) {
+        let (x, w) = (
+            x + 0.04,
+            label.chars().count() as f64 * 7.0 / 880.0 * spans.0,
+        );
+        let covers = |ty: f64| {
+            placed
+                .iter()
+                .any(|&(px, py, pw)| x < px + pw && px < x + w && (ty - py).abs() < h)
+        };
+        let below_last = placed.last().map_or(y, |&(_, py, _)| py - 1.05 * h);
+        let ty = [y - 0.15 * pad, y + 1.1 * h, below_last]
+            .into_iter()
+            .find(|&ty| !covers(ty))
+            .unwrap_or(y - 0.15 * pad);
+        placed.push((x, ty, w));
+    }
+    placed.into_iter().map(|(x, y, _)| (x, y)).collect()
 }
 
 /// A legend entry with the devices its rows ran on, in a bench where some row ran elsewhere
@@ -888,6 +926,19 @@ mod tests {
         assert!(gap_to_bound(at(0.4)) > gap_to_bound(at(0.25)));
         assert_eq!(sweep_peaks(&rows).len(), 1);
         assert!(sweep_crop(&sim, "tiny", &[0.0], None).is_err());
+    }
+
+    #[test]
+    fn a_pareto_label_that_would_cover_another_moves_and_a_free_one_stays() {
+        let labels = vec!["gap 20 it".to_string(); 3];
+        let spans = (4.0, 10.0);
+        let h = 16.0 / 560.0 * spans.1;
+        // Two points on top of each other, then one far away.
+        let pts = [(0.0, 17.0), (0.01, 17.02), (3.0, 22.0)];
+        let spots = label_spots(&pts, &labels, spans, 0.5);
+        assert_eq!(spots[0], (0.04, 17.0 - 0.075));
+        assert!((spots[1].1 - spots[0].1).abs() >= h, "{spots:?}");
+        assert_eq!(spots[2], (3.04, 22.0 - 0.075));
     }
 
     #[test]
