@@ -17,10 +17,11 @@
 mod common;
 
 use specmux_core::metrics;
+use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_gpu::GpuReconstructor;
 use specmux_twin::experiment::Experiment;
-use specmux_twin::forward::Pipeline;
+use specmux_twin::forward::{Pipeline, Simulated};
 use specmux_twin::rig::Rig;
 use specmux_twin::run;
 use specmux_twin::scene::Materials;
@@ -29,9 +30,8 @@ fn check(toml: &str) {
     check_within(toml, 2e-5);
 }
 
-/// `check` with the channels after de-aliasing within `channels` NRMSE of the CPU's.
-fn check_within(toml: &str, channels: f64) {
-    let Some(ctx) = common::context() else { return };
+/// The twin's frame of the experiment `toml` and the CPU reconstructor of its rig.
+fn simulated(toml: &str) -> (Simulated, Reconstructor) {
     let exp = Experiment::from_toml(toml, "test.toml").unwrap();
     let lib = Library::default_root();
     let materials = Materials::load(&lib).unwrap();
@@ -41,6 +41,13 @@ fn check_within(toml: &str, channels: f64) {
         .run()
         .unwrap();
     let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+    (sim, recon)
+}
+
+/// `check` with the channels after de-aliasing within `channels` NRMSE of the CPU's.
+fn check_within(toml: &str, channels: f64) {
+    let Some(ctx) = common::context() else { return };
+    let (sim, recon) = simulated(toml);
     let cpu = recon.run(&sim.frame, None).unwrap();
     let gpu_recon = GpuReconstructor::new(&ctx, &recon).unwrap();
     let mut gpu = gpu_recon.output_cube();
@@ -133,8 +140,6 @@ fn joint_dead_leaves_with_timing() {
 #[test]
 fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
     let Some(ctx) = common::context() else { return };
-    let lib = Library::default_root();
-    let materials = Materials::load(&lib).unwrap();
     for (keys, named) in [
         ("prior = \"pnp\"\n", "reconstruct.joint.prior"),
         ("noise_weights = true\n", "reconstruct.joint.noise_weights"),
@@ -146,13 +151,7 @@ fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
         let toml = format!(
             "[scene]\nsize = [32, 32]\n[rig.sensor]\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 2\n{keys}"
         );
-        let exp = Experiment::from_toml(&toml, "test.toml").unwrap();
-        let rig = Rig::build(&exp, &lib, &materials).unwrap();
-        let (sim, _) = Pipeline::build(&exp, &rig, &materials)
-            .unwrap()
-            .run()
-            .unwrap();
-        let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+        let (_, recon) = simulated(&toml);
         let e = GpuReconstructor::new(&ctx, &recon)
             .err()
             .map(|e| e.to_string());

@@ -944,6 +944,13 @@ mod tests {
     #[test]
     fn work_precision_rows_are_finite_and_the_front_is_marked() {
         let sim = tiny();
+        let joint = Setting {
+            method: Method::Joint,
+            iterations: 30,
+            crop: 0.25,
+            window: WindowShape::Square,
+            prior: Prior::Tv,
+        };
         let grid = [
             Setting {
                 method: Method::Fourier,
@@ -959,19 +966,10 @@ mod tests {
                 window: WindowShape::Square,
                 prior: Prior::Tv,
             },
+            joint,
             Setting {
-                method: Method::Joint,
-                iterations: 30,
-                crop: 0.25,
-                window: WindowShape::Square,
-                prior: Prior::Tv,
-            },
-            Setting {
-                method: Method::Joint,
-                iterations: 30,
-                crop: 0.25,
-                window: WindowShape::Square,
                 prior: Prior::Pnp,
+                ..joint
             },
         ];
         let rows = work_precision(&sim, &grid, 2).unwrap();
