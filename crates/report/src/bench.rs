@@ -15,7 +15,7 @@ use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::gap::GapConfig;
 use specmux_core::gap::Method;
-use specmux_core::joint::Prior;
+use specmux_core::joint::{Prior, WeightRule};
 use specmux_core::metrics;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
@@ -67,6 +67,22 @@ pub struct Setting {
     pub window: WindowShape,
     /// The joint method's prior (TV or plug-and-play); TV for the other methods.
     pub prior: Prior,
+    /// The joint method's use of the camera's noise model; off for the other methods.
+    pub noise: NoiseAware,
+}
+
+/// How the joint method uses the camera's noise model (`[reconstruct.joint]`): the bench's
+/// noise-aware rows, on experiments with a `[rig.sensor]`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum NoiseAware {
+    /// Unweighted data term, λ from `tv_weight`.
+    #[default]
+    Off,
+    /// Data term weighted by the noise model (`noise_weights = true`).
+    Weighted,
+    /// Weighted, and λ by the discrepancy principle (`weight_rule = "discrepancy"`).
+    Discrepancy,
 }
 
 impl Setting {
@@ -77,7 +93,11 @@ impl Setting {
             Method::Gap => format!("gap {} it", self.iterations),
             Method::GapTv => format!("gap-tv {} it", self.iterations),
             Method::Joint if self.prior == Prior::Pnp => format!("pnp {} it", self.iterations),
-            Method::Joint => format!("joint {} it", self.iterations),
+            Method::Joint => match self.noise {
+                NoiseAware::Off => format!("joint {} it", self.iterations),
+                NoiseAware::Weighted => format!("joint {} it noise-weighted", self.iterations),
+                NoiseAware::Discrepancy => format!("joint {} it discrepancy λ", self.iterations),
+            },
             Method::Auto => "auto".to_string(),
         };
         let w = match self.window {
@@ -108,6 +128,7 @@ pub fn default_grid() -> Vec<Setting> {
                 crop,
                 window,
                 prior: Prior::Tv,
+                noise: NoiseAware::Off,
             });
         }
     }
@@ -119,6 +140,7 @@ pub fn default_grid() -> Vec<Setting> {
                 crop: 0.25,
                 window: WindowShape::Square,
                 prior: Prior::Tv,
+                noise: NoiseAware::Off,
             });
         }
         for window in &shapes[1..] {
@@ -128,21 +150,42 @@ pub fn default_grid() -> Vec<Setting> {
                 crop: 0.25,
                 window: *window,
                 prior: Prior::Tv,
+                noise: NoiseAware::Off,
             });
         }
     }
     for prior in [Prior::Tv, Prior::Pnp] {
         for iterations in [10, 20, 40, 80] {
-            g.push(Setting {
-                method: Method::Joint,
-                iterations,
-                crop: 0.25,
-                window: WindowShape::Square,
-                prior,
-            });
+            g.push(joint_setting(iterations, prior, NoiseAware::Off));
         }
     }
     g
+}
+
+/// The grid for `sim`: the default grid, and where the rig has a camera (a noise model) the
+/// joint method's noise-aware rows — weighted, and with the discrepancy λ — at 20, 40, 80 it.
+pub fn grid_for(sim: &Simulated) -> Vec<Setting> {
+    let mut g = default_grid();
+    if sim.rig.design().noise.is_some() {
+        for noise in [NoiseAware::Weighted, NoiseAware::Discrepancy] {
+            for iterations in [20, 40, 80] {
+                g.push(joint_setting(iterations, Prior::Tv, noise));
+            }
+        }
+    }
+    g
+}
+
+/// The joint method at crop 0.25, square window.
+fn joint_setting(iterations: usize, prior: Prior, noise: NoiseAware) -> Setting {
+    Setting {
+        method: Method::Joint,
+        iterations,
+        crop: 0.25,
+        window: WindowShape::Square,
+        prior,
+        noise,
+    }
 }
 
 /// Where the work–precision runs go (`specmux bench --device`, `[compute] device`): the CPU,
@@ -361,6 +404,10 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
         Method::Joint => {
             exp.reconstruct.joint.iterations = s.iterations;
             exp.reconstruct.joint.prior = s.prior;
+            exp.reconstruct.joint.noise_weights = s.noise != NoiseAware::Off;
+            if s.noise == NoiseAware::Discrepancy {
+                exp.reconstruct.joint.weight_rule = WeightRule::Discrepancy;
+            }
         }
         _ => exp.reconstruct.gap.iterations = s.iterations,
     }
@@ -504,6 +551,7 @@ pub fn work_precision_plot(
             r.setting.crop == 0.25
                 && r.setting.window == WindowShape::Square
                 && r.setting.prior == Prior::Tv
+                && r.setting.noise == NoiseAware::Off
         })
         .map(|r| auto::Entry {
             method: r.setting.method,
@@ -530,23 +578,45 @@ pub fn work_precision_plot(
             .y_desc("final cube PSNR, dB")
             .draw()
             .map_err(|x| e(&x))?;
-        for (c, method, prior, name) in [
-            (0, Method::Fourier, Prior::Tv, "fourier (crops, windows)"),
-            (1, Method::Gap, Prior::Tv, "gap"),
-            (2, Method::GapTv, Prior::Tv, "gap-tv"),
-            (3, Method::Joint, Prior::Tv, "joint (PDHG, vectorial TV)"),
+        let (tv, pnp, off) = (Prior::Tv, Prior::Pnp, NoiseAware::Off);
+        for (c, method, prior, noise, name) in [
+            (0, Method::Fourier, tv, off, "fourier (crops, windows)"),
+            (1, Method::Gap, tv, off, "gap"),
+            (2, Method::GapTv, tv, off, "gap-tv"),
+            (3, Method::Joint, tv, off, "joint (PDHG, vectorial TV)"),
             (
                 4,
                 Method::Joint,
-                Prior::Pnp,
+                pnp,
+                off,
                 "joint plug-and-play (ADMM, guided smoother)",
+            ),
+            (
+                5,
+                Method::Joint,
+                tv,
+                NoiseAware::Weighted,
+                "joint, noise-weighted",
+            ),
+            (
+                6,
+                Method::Joint,
+                tv,
+                NoiseAware::Discrepancy,
+                "joint, noise-weighted, discrepancy λ",
             ),
         ] {
             let color = Palette99::pick(c).to_rgba();
             let of_method: Vec<&&BenchRow> = ok
                 .iter()
-                .filter(|r| r.setting.method == method && r.setting.prior == prior)
+                .filter(|r| {
+                    let s = &r.setting;
+                    (s.method, s.prior, s.noise) == (method, prior, noise)
+                })
                 .collect();
+            if of_method.is_empty() {
+                continue;
+            }
             let pts: Vec<(f64, f64)> = of_method
                 .iter()
                 .map(|r| (r.seconds.ln(), r.psnr_db))
@@ -586,6 +656,7 @@ pub fn work_precision_plot(
             auto.as_ref().is_some_and(|a| {
                 r.setting.method == a.method && r.setting.iterations == a.iterations
             }) && r.setting.prior == Prior::Tv
+                && r.setting.noise == NoiseAware::Off
                 && r.setting.crop == 0.25
                 && r.setting.window == WindowShape::Square
         });
@@ -942,15 +1013,26 @@ mod tests {
     }
 
     #[test]
+    fn a_rig_with_a_camera_adds_the_noise_aware_joint_rows() {
+        let sim = tiny();
+        assert_eq!(grid_for(&sim), default_grid());
+        let mut exp = sim.exp.clone();
+        exp.rig.sensor = Some(Default::default());
+        let noisy = simulate(&exp, &Library::default_root()).unwrap();
+        let grid = grid_for(&noisy);
+        let extra = &grid[default_grid().len()..];
+        assert_eq!(extra.len(), 6);
+        assert_eq!(extra[0].label(), "joint 20 it noise-weighted, crop 0.25 square");
+        assert_eq!(extra[5].label(), "joint 80 it discrepancy λ, crop 0.25 square");
+        // Each runs: the weighted data term and the discrepancy search, through the Reconstructor.
+        let rows = work_precision(&noisy, &[extra[0], extra[3]], 1).unwrap();
+        assert!(rows.iter().all(|r| r.psnr_db.is_finite()), "{rows:?}");
+    }
+
+    #[test]
     fn work_precision_rows_are_finite_and_the_front_is_marked() {
         let sim = tiny();
-        let joint = Setting {
-            method: Method::Joint,
-            iterations: 30,
-            crop: 0.25,
-            window: WindowShape::Square,
-            prior: Prior::Tv,
-        };
+        let joint = joint_setting(30, Prior::Tv, NoiseAware::Off);
         let grid = [
             Setting {
                 method: Method::Fourier,
@@ -958,6 +1040,7 @@ mod tests {
                 crop: 0.25,
                 window: WindowShape::Circular,
                 prior: Prior::Tv,
+                noise: NoiseAware::Off,
             },
             Setting {
                 method: Method::Gap,
@@ -965,12 +1048,10 @@ mod tests {
                 crop: 0.25,
                 window: WindowShape::Square,
                 prior: Prior::Tv,
+                noise: NoiseAware::Off,
             },
             joint,
-            Setting {
-                prior: Prior::Pnp,
-                ..joint
-            },
+            joint_setting(30, Prior::Pnp, NoiseAware::Off),
         ];
         let rows = work_precision(&sim, &grid, 2).unwrap();
         assert_eq!(rows.len(), 4);
@@ -1040,6 +1121,7 @@ mod tests {
             crop: 0.25,
             window: WindowShape::Square,
             prior: Prior::Tv,
+            noise: NoiseAware::Off,
         };
         let grid = [
             setting(Method::Fourier, 0),

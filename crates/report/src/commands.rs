@@ -236,7 +236,7 @@ pub fn bench(
         device.describe()
     );
     let rows =
-        crate::bench::work_precision_on(&device, &sim, &crate::bench::default_grid(), repeats)?;
+        crate::bench::work_precision_on(&device, &sim, &crate::bench::grid_for(&sim), repeats)?;
     let md = crate::bench::work_precision_markdown(&rows);
     say!(text, "{md}");
     let files = OutputSet::begin(out)?;
