@@ -52,9 +52,10 @@ pub enum Command {
         npy: bool,
     },
     /// Work–precision study: simulate the frame once, reconstruct it with Fourier, GAP, GAP-TV
-    /// and the joint method (TV and plug-and-play priors) over a grid of iterations, crops and
-    /// window shapes; table (stdout, JSON, Markdown) and a plot of final-cube PSNR against median
-    /// run time with the Pareto front.
+    /// and the joint method (TV and plug-and-play priors; with a [rig.sensor] also noise-weighted
+    /// and with the discrepancy λ) over a grid of iterations, crops and window shapes; table
+    /// (stdout, JSON, Markdown) and a plot of final-cube PSNR against median run time with the
+    /// Pareto front.
     Bench {
         /// A built-in scene (dead-leaves, shaded-objects) or an experiment file.
         experiment: String,
@@ -67,8 +68,8 @@ pub enum Command {
         #[arg(long)]
         size: Option<usize>,
         /// Where to reconstruct: cpu, gpu (needs the gpu feature and an adapter) or auto; the
-        /// default is the experiment's [compute] device. Settings without a GPU kernel (joint)
-        /// stay on the CPU; the table and plot say where each ran.
+        /// default is the experiment's [compute] device. Settings without a GPU kernel (plug-and-
+        /// play, noise-aware) stay on the CPU; the table and plot say where each ran.
         #[arg(long, value_parser = ["cpu", "gpu", "auto"])]
         device: Option<String>,
     },
