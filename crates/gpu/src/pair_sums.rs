@@ -146,7 +146,7 @@ impl GpuPairSums {
 }
 
 /// Shape error unless the bins are sorted by (kx, ky) without repeats, each with 1–3 intervals,
-/// every number a finite f32 and the indices within ±2³⁰.
+/// values and weights finite f32, interval ends not NaN and the indices within ±2³⁰.
 fn check(bins: &[PairBin]) -> Result<()> {
     let bad = |i: usize, why: &str| Err(GpuError::Shape(format!("pair sums: bin {i} {why}")));
     for (i, b) in bins.iter().enumerate() {
@@ -156,11 +156,17 @@ fn check(bins: &[PairBin]) -> Result<()> {
         if b.kx.abs().max(b.ky.abs()) >= 1 << 30 {
             return bad(i, "has an index beyond ±2³⁰");
         }
-        let ivs = b.intervals[..b.n].iter();
-        let numbers = ivs.flat_map(|v| [v.lo, v.hi, v.c_lo[0], v.c_lo[1], v.c_hi[0], v.c_hi[1]]);
+        let ivs = &b.intervals[..b.n];
+        let weights = ivs
+            .iter()
+            .flat_map(|v| [v.c_lo, v.c_hi].into_iter().flatten());
         // Finite in f32 (the kernel's type), so also in f64.
-        if !(b.value.iter().copied().chain(numbers)).all(|v| (v as f32).is_finite()) {
-            return bad(i, "has a value that is not a finite f32");
+        if !(b.value.iter().copied().chain(weights)).all(|v| (v as f32).is_finite()) {
+            return bad(i, "has a value or weight that is not a finite f32");
+        }
+        // Ends are only compared (as ranks): ±∞ is an open end, NaN has no place.
+        if ivs.iter().any(|v| v.lo.is_nan() || v.hi.is_nan()) {
+            return bad(i, "has a NaN interval end");
         }
         if i > 0 && (bins[i - 1].kx, bins[i - 1].ky) >= (b.kx, b.ky) {
             return bad(i, "is not after the previous one in (kx, ky) order");

@@ -9,6 +9,7 @@ use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
+use crate::optics::relay::pair_summer_for;
 use crate::rig::Rig;
 use crate::scene;
 use crate::scene::Materials;
@@ -126,19 +127,32 @@ fn timed<In, Out>(times: &mut Vec<StageTime>, step: &dyn Step<In, Out>, input: &
     Ok(out)
 }
 
+/// A failure to open `[compute] device`, naming the key and its value.
+fn on_device(exp: &Experiment, e: specmux_core::Error) -> specmux_core::Error {
+    let device = format!("{:?}", exp.compute.device).to_lowercase();
+    e.within(&exp.file, "compute.device", device)
+}
+
 impl Pipeline {
     /// The stages this experiment needs, in light-path order.
     pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
+            let optics = exp.rig.optics();
             let chain = Chain::new(
-                &exp.rig.optics(),
+                &optics,
                 &rig.imaged_carriers,
                 &rig.pattern_lights(exp)?,
                 rig.width,
                 rig.height,
             )?;
+            let chain = match optics.fourier_filter {
+                Some(_) => chain.with_pair_summer(
+                    pair_summer_for(exp.compute.device).map_err(|e| on_device(exp, e))?,
+                ),
+                None => chain,
+            };
             PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
         } else {
             PatternSteps::Ideal(IdealPatternStage {
@@ -164,10 +178,7 @@ impl Pipeline {
                     exp.compute.device,
                     (rig.width, rig.height, rig.imaged_carriers.len()),
                 )
-                .map_err(|e| {
-                    let device = format!("{:?}", exp.compute.device).to_lowercase();
-                    e.within(&exp.file, "compute.device", device)
-                })?,
+                .map_err(|e| on_device(exp, e))?,
             },
             sensor: match &exp.rig.sensor {
                 Some(c) => Some(SensorStage {
@@ -434,7 +445,11 @@ impl Stage for RelayStage {
     }
     fn describe(&self) -> String {
         match &self.filter {
-            Some(f) => imaging::describe_filter(f, self.chain.modulator()),
+            Some(f) => format!(
+                "{}; pair sums on the {}",
+                imaging::describe_filter(f, self.chain.modulator()),
+                self.chain.pair_device().to_uppercase()
+            ),
             None => "no Fourier filter: the modulator's whole band-limited spectrum".into(),
         }
     }

@@ -19,8 +19,9 @@ use crate::optics::fourier_filter::Light;
 use crate::optics::fourier_filter::Mask;
 use crate::optics::light::PatternLight;
 use crate::optics::psf::LensConfig;
-use crate::optics::relay::pair_sums;
 use crate::optics::relay::passed_bins;
+use crate::optics::relay::CpuPairSums;
+use crate::optics::relay::PairSummer;
 use crate::optics::relay::PairSums;
 use crate::optics::relay::PassedBin;
 use rayon::prelude::*;
@@ -32,6 +33,7 @@ use specmux_core::error::Result;
 use specmux_core::fft::{Fft2, HalfSpectrum};
 use specmux_core::spectral::Curve;
 use specmux_core::Cube;
+use std::sync::Arc;
 
 /// An opening must span at least this many frequency bins in radius, else the grid is refined.
 pub const MIN_PINHOLE_BINS: f64 = 4.0;
@@ -252,6 +254,8 @@ pub struct Chain {
     lights: Vec<PatternLight>,
     width: usize,
     height: usize,
+    /// Where the relay's pair sums run (the CPU unless [`Chain::with_pair_summer`]).
+    pairs: Arc<dyn PairSummer>,
 }
 
 impl Chain {
@@ -281,7 +285,18 @@ impl Chain {
             lights: lights.to_vec(),
             width: w,
             height: h,
+            pairs: Arc::new(CpuPairSums),
         })
+    }
+
+    /// The chain with its relay's pair sums on `pairs` (`relay::pair_summer_for`).
+    pub fn with_pair_summer(self, pairs: Arc<dyn PairSummer>) -> Chain {
+        Chain { pairs, ..self }
+    }
+
+    /// "cpu" or "gpu": where the relay's pair sums run.
+    pub fn pair_device(&self) -> &'static str {
+        self.pairs.device()
     }
 
     pub fn config(&self) -> &OpticsConfig {
@@ -301,7 +316,8 @@ impl Chain {
     /// Pattern `i` through every step.
     fn image_one(&self, i: usize) -> Result<Imaged> {
         let display = self.dither_one(i)?;
-        let relayed = relay(&self.cfg, &self.modulator, &display, &self.lights[i])?;
+        let pairs = self.pairs.as_ref();
+        let relayed = relay(&self.cfg, &self.modulator, &display, &self.lights[i], pairs)?;
         let image = lens(
             self.cfg.lens.as_ref(),
             &self.modulator,
@@ -347,7 +363,9 @@ impl Chain {
     ) -> Result<Vec<IntensitySpectrum>> {
         let dmd = self.cfg.dmd.as_ref();
         (displays.iter().zip(&self.lights))
-            .map(|(d, light)| relay_filtered(dmd, f, &self.modulator, d, light))
+            .map(|(d, light)| {
+                relay_filtered(dmd, f, &self.modulator, d, light, self.pairs.as_ref())
+            })
             .collect()
     }
 
@@ -689,27 +707,31 @@ enum Relayed {
     Open(ModulatorSpectrum),
 }
 
-/// The relay with the experiment's Fourier filter, or the open relay without one.
+/// The relay with the experiment's Fourier filter (its pair sums on `pairs`), or the open
+/// relay without one.
 pub fn relay(
     cfg: &OpticsConfig,
     m: &DmdConfig,
     display: &Display,
     light: &PatternLight,
+    pairs: &dyn PairSummer,
 ) -> Result<IntensitySpectrum> {
     match &cfg.fourier_filter {
-        Some(f) => relay_filtered(cfg.dmd.as_ref(), f, m, display, light),
+        Some(f) => relay_filtered(cfg.dmd.as_ref(), f, m, display, light, pairs),
         None => Ok(relay_open(cfg.dmd.as_ref(), m, display)),
     }
 }
 
 /// The intensity spectrum past the Fourier mask: the moment spectra s0, s1 of the pairs of
-/// bins the openings pass (exact over the light's wavelengths), and the share of light passed.
+/// bins the openings pass (exact over the light's wavelengths, summed on `pairs`), and the
+/// share of light passed.
 pub fn relay_filtered(
     dmd: Option<&DmdConfig>,
     f: &FourierFilterConfig,
     m: &DmdConfig,
     display: &Display,
     light: &PatternLight,
+    pairs: &dyn PairSummer,
 ) -> Result<IntensitySpectrum> {
     let g = display.geometry;
     let ap = f.aperture(m.pitch_um, g.fxd, g.fyd, light);
@@ -719,7 +741,7 @@ pub fn relay_filtered(
     let bins = passed_bins(&ap, light, f.illumination, grid.coarse(), |kx, ky| {
         spectrum.source(kx, ky)
     })?;
-    let sums = pair_sums(&bins);
+    let sums = pairs.pair_sums(&bins)?;
     let throughput = if coherent {
         coherent_throughput(&bins, &spectrum, &grid)
     } else {
