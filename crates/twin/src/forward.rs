@@ -649,3 +649,46 @@ fn timing_stage(cfg: &TimingConfig) -> Result<TimingStage> {
         warnings: tw.warnings,
     })
 }
+
+/// The forward model on a device, for the GPU tests of its stages.
+#[cfg(all(test, feature = "gpu"))]
+pub(crate) mod gpu_tests {
+    use super::Pipeline;
+    use crate::experiment::Experiment;
+    use crate::rig::Rig;
+    use crate::scene::Materials;
+    use specmux_core::Cube;
+
+    /// The frame and the stages' lines of a 48 × 40 scene through `rig` (TOML sections) with
+    /// `[compute] device`; None (said in one line) when no GPU adapter opens.
+    pub fn run(rig: &str, device: &str) -> Option<(Cube, String)> {
+        if let Err(specmux_gpu::GpuError::NoAdapter(e)) = specmux_gpu::GpuContext::new() {
+            eprintln!("no GPU adapter found ({e}): GPU test skipped");
+            return None;
+        }
+        let toml = format!("[scene]\nsize = [48, 40]\n{rig}[compute]\ndevice = \"{device}\"\n");
+        let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
+        let lib = specmux_core::spectral::Library::default_root();
+        let materials = Materials::load(&lib).unwrap();
+        let rig = Rig::build(&exp, &lib, &materials).unwrap();
+        let p = Pipeline::build(&exp, &rig, &materials).unwrap();
+        Some((p.run().unwrap().0.frame, p.explain()))
+    }
+
+    /// `[compute] device = "gpu"` sums the relay's pairs on the GPU (the stage says so) and
+    /// gives the CPU's frame within 1e-5 NRMSE: the pair sums' bound, which the lens and the
+    /// resampling (linear, norm ≤ 1 per pattern) do not amplify. DMD 64 × 48, band light.
+    #[test]
+    fn the_forward_model_with_gpu_pair_sums_gives_the_cpus_frame() {
+        let rig = "[rig.dmd]\nwidth = 64\nheight = 48\n[rig.fourier_filter]\n[rig.lens]\n";
+        let Some((cpu, explain)) = run(rig, "cpu") else {
+            return;
+        };
+        assert!(explain.contains("pair sums on the CPU"), "{explain}");
+        let (gpu, explain) = run(rig, "gpu").unwrap();
+        assert!(explain.contains("pair sums on the GPU"), "{explain}");
+        let e = specmux_core::metrics::compare(&cpu, &gpu).unwrap().nrmse;
+        eprintln!("forward model frame, GPU pair sums and multiplex against CPU: NRMSE {e:.2e}");
+        assert!(e < 1e-5, "{e:.2e}");
+    }
+}
