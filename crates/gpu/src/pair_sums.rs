@@ -1,8 +1,8 @@
 //! The forward model's 4f-relay pair sums on the GPU (shaders/pair_sums.wgsl): for the bins a
 //! Fourier mask passes, S(q) = Σ value_a·conj(value_b)·∫(pair weights over the wavelengths both
 //! pass) at q = k_a − k_b, qx ≥ 0 — the twin's `optics::relay::pair_sums`, one invocation per
-//! cell, in f32 with the error bounded as docs/gpu.md states. One upload, one kernel, one
-//! read-back per call; the crate takes plain bins, not the twin's types.
+//! cell, in f32 with the error bounded as docs/gpu.md states. One upload, one kernel (dispatched
+//! once per chunk of 64 columns), one read-back per call; the crate takes plain bins, not the twin's types.
 
 use crate::context::{linear_groups, GpuContext};
 use crate::error::{GpuError, Result};
@@ -64,8 +64,11 @@ struct Params {
     ncols: u32,
     qy_max: u32,
     ncells: u32,
-    _pad: u32,
+    ca0: u32,
 }
+
+/// Columns kx_a per dispatch (`CHUNK` in shaders/pair_sums.wgsl).
+const CHUNK: usize = 64;
 
 /// The pair-sum kernel, compiled once; buffers are made per call (the bin count varies).
 pub struct GpuPairSums {
@@ -100,47 +103,52 @@ impl GpuPairSums {
         let ncells = (qx_max + 1) as u128 * (2 * qy_max + 1) as u128;
         let limit = ctx.device.limits().max_storage_buffer_binding_size as u128;
         let bin_bytes = (bins.len() * std::mem::size_of::<GpuBin>()) as u128;
-        if ncells * 16 > limit || bin_bytes > limit {
+        if ncells * 32 > limit || bin_bytes > limit {
             return Err(GpuError::Unsupported(format!(
                 "pair sums: {} bins over {ncells} cells, more than one buffer of {limit} bytes holds",
                 bins.len()
             )));
         }
         let (runs, cols) = runs(bins, first.kx, qx_max as usize + 1);
-        let params = Params {
+        let params = |ca0: usize| Params {
             ncols: (qx_max + 1) as u32,
             qy_max: qy_max as u32,
             ncells: ncells as u32,
-            _pad: 0,
+            ca0: ca0 as u32,
         };
-        let sums = ctx.storage("pair sums", ncells as u64 * 16);
+        let sums = ctx.storage("pair sums", ncells as u64 * 32);
         let staging = ctx.readback("pair sums staging", sums.size());
-        let bind = ctx.bind(
-            &self.pipeline,
-            &[
-                &ctx.storage_init("pair bins", &gpu_bins(bins)),
-                &ctx.storage_init("pair runs", &runs),
-                &ctx.storage_init("pair columns", &cols),
-                &sums,
-                &ctx.uniform("pair params", &params),
-            ],
+        let (bins, runs, cols) = (
+            ctx.storage_init("pair bins", &gpu_bins(bins)),
+            ctx.storage_init("pair runs", &runs),
+            ctx.storage_init("pair columns", &cols),
         );
+        let chunks: Vec<(wgpu::Buffer, wgpu::BindGroup)> = (0..=qx_max as usize)
+            .step_by(CHUNK)
+            .map(|ca0| {
+                let u = ctx.uniform("pair params", &params(ca0));
+                let bind = ctx.bind(&self.pipeline, &[&bins, &runs, &cols, &sums, &u]);
+                (u, bind)
+            })
+            .collect();
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
             cp.set_pipeline(&self.pipeline);
-            cp.set_bind_group(0, &bind, &[]);
             let [x, y, z] = linear_groups(ncells as usize, 64);
-            cp.dispatch_workgroups(x, y, z);
+            for (_, bind) in &chunks {
+                cp.set_bind_group(0, bind, &[]);
+                cp.dispatch_workgroups(x, y, z);
+            }
         }
         enc.copy_buffer_to_buffer(&sums, 0, &staging, 0, sums.size());
         ctx.queue.submit([enc.finish()]);
-        let mut out = vec![[0.0f32; 4]; ncells as usize];
+        let mut out = vec![[0.0f32; 4]; 2 * ncells as usize];
         ctx.read_into(&staging, &mut out)?;
         Ok(PairSumGrid {
             qx_max,
             qy_max,
-            sums: out,
+            sums: out.into_iter().step_by(2).collect(),
         })
     }
 }

@@ -7,7 +7,9 @@
 // qy, so no pair is visited that cannot contribute. Interval ends are ranks of the host's f64
 // values (the same comparisons as the CPU); cumulative weights come as f32 (hi, lo) splits so
 // that their difference keeps f32 precision relative to itself. Each column's pairs are summed
-// plainly, the columns with Kahan compensation.
+// plainly, the columns with Kahan compensation. A dispatch covers one chunk of columns kx_a
+// (lavapipe ends long loops early, so no invocation runs over all of them): the running sum
+// and its compensation stay in `sums` between the chunks' dispatches.
 
 struct Interval {
     lo: u32,
@@ -30,14 +32,18 @@ struct Params {
     ncols: u32,
     qy_max: u32,
     ncells: u32,
-    _pad: u32,
+    // First column kx_a − kx0 of this dispatch's chunk; it ends at ca0 + CHUNK.
+    ca0: u32,
 }
+
+const CHUNK: u32 = 64u;
 
 @group(0) @binding(0) var<storage, read> bins: array<Bin>;
 // Per run: (first ky, length, index of its first bin, unused).
 @group(0) @binding(1) var<storage, read> runs: array<vec4<i32>>;
 // Runs of column c (kx = kx0 + c) are runs[cols[c]] .. runs[cols[c + 1]].
 @group(0) @binding(2) var<storage, read> cols: array<u32>;
+// Per cell: the sum at 2·cell, its Kahan compensation at 2·cell + 1.
 @group(0) @binding(3) var<storage, read_write> sums: array<vec4<f32>>;
 @group(0) @binding(4) var<uniform> pp: Params;
 
@@ -97,9 +103,9 @@ fn pair_sums(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     let h = 2u * pp.qy_max + 1u;
     let qx = cell / h;
     let qy = i32(cell % h) - i32(pp.qy_max);
-    var sum = vec4<f32>(0.0);
-    var comp = vec4<f32>(0.0);
-    for (var ca = qx; ca < pp.ncols; ca++) {
+    var sum = sums[2u * cell];
+    var comp = sums[2u * cell + 1u];
+    for (var ca = max(qx, pp.ca0); ca < min(pp.ncols, pp.ca0 + CHUNK); ca++) {
         let cb = ca - qx;
         var part = vec4<f32>(0.0);
         for (var i = cols[ca]; i < cols[ca + 1u]; i++) {
@@ -113,5 +119,6 @@ fn pair_sums(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         comp = (t - sum) - y;
         sum = t;
     }
-    sums[cell] = sum;
+    sums[2u * cell] = sum;
+    sums[2u * cell + 1u] = comp;
 }
