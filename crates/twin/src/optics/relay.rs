@@ -366,6 +366,19 @@ pub fn pair_summer_for(
     Ok(Arc::new(CpuPairSums))
 }
 
+/// Per component, the largest |GPU − CPU| over the cells relative to the CPU's largest |sum|
+/// (absolute where that is 0); the reaches must agree.
+#[cfg(all(test, feature = "gpu"))]
+pub(crate) fn gpu_error(cpu: &PairSums, gpu: &PairSums) -> [f64; 2] {
+    assert_eq!(cpu.reach(), gpu.reach());
+    let max = |s: &[Complex64]| s.iter().fold(0.0f64, |m, v| m.max(v.norm()));
+    [0, 1].map(|k| {
+        let diff: Vec<Complex64> = cpu.s[k].iter().zip(&gpu.s[k]).map(|(a, b)| a - b).collect();
+        let scale = max(&cpu.s[k]);
+        max(&diff) / if scale > 0.0 { scale } else { 1.0 }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -655,17 +668,4 @@ mod tests {
         );
         assert!(worst[0] < 1e-5 && worst[1] < 1e-5, "{worst:?}");
     }
-}
-
-/// Per component, the largest |GPU − CPU| over the cells relative to the CPU's largest |sum|
-/// (absolute where that is 0); the reaches must agree.
-#[cfg(all(test, feature = "gpu"))]
-pub(crate) fn gpu_error(cpu: &PairSums, gpu: &PairSums) -> [f64; 2] {
-    assert_eq!(cpu.reach(), gpu.reach());
-    let max = |s: &[Complex64]| s.iter().fold(0.0f64, |m, v| m.max(v.norm()));
-    [0, 1].map(|k| {
-        let diff: Vec<Complex64> = cpu.s[k].iter().zip(&gpu.s[k]).map(|(a, b)| a - b).collect();
-        let scale = max(&cpu.s[k]);
-        max(&diff) / if scale > 0.0 { scale } else { 1.0 }
-    })
 }
