@@ -2,7 +2,7 @@
 //! Fourier mask passes, S(q) = Σ value_a·conj(value_b)·∫(pair weights over the wavelengths both
 //! pass) at q = k_a − k_b, qx ≥ 0 — the twin's `optics::relay::pair_sums`, one invocation per
 //! cell, in f32 with the error bounded as docs/gpu.md states. One upload, one kernel (dispatched
-//! once per chunk of 64 columns), one read-back per call; the crate takes plain bins, not the twin's types.
+//! once per chunk of 64 columns), one read-back per call; it takes plain bins, not the twin's.
 
 use crate::context::{linear_groups, GpuContext};
 use crate::error::{GpuError, Result};
@@ -85,65 +85,39 @@ impl GpuPairSums {
     }
 
     /// The pair sums of `bins`, sorted by (kx, ky) without repeats. Unsorted bins, a count of
-    /// intervals outside 1–3 or a non-finite number is a shape error; a grid of sums larger
-    /// than the device's buffers is `Unsupported`.
+    /// intervals outside 1–3, a value or weight that is not a finite f32 or a NaN end is a
+    /// shape error; a grid of sums larger than the device's buffers is `Unsupported`.
     pub fn run(&self, ctx: &GpuContext, bins: &[PairBin]) -> Result<PairSumGrid> {
         check(bins)?;
-        let (Some(first), Some(last)) = (bins.first(), bins.last()) else {
+        let Some((kx0, qx_max, qy_max)) = reach(ctx, bins)? else {
             return Ok(PairSumGrid {
                 qx_max: 0,
                 qy_max: 0,
                 sums: vec![[0.0; 4]],
             });
         };
-        let (ky0, ky1) = bins
-            .iter()
-            .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
-        let (qx_max, qy_max) = (last.kx - first.kx, ky1 - ky0);
-        let ncells = (qx_max + 1) as u128 * (2 * qy_max + 1) as u128;
-        let limit = ctx.device.limits().max_storage_buffer_binding_size as u128;
-        let bin_bytes = (bins.len() * std::mem::size_of::<GpuBin>()) as u128;
-        if ncells * 32 > limit || bin_bytes > limit {
-            return Err(GpuError::Unsupported(format!(
-                "pair sums: {} bins over {ncells} cells, more than one buffer of {limit} bytes holds",
-                bins.len()
-            )));
-        }
-        let (runs, cols) = runs(bins, first.kx, qx_max as usize + 1);
-        let params = |ca0: usize| Params {
-            ncols: (qx_max + 1) as u32,
-            qy_max: qy_max as u32,
-            ncells: ncells as u32,
-            ca0: ca0 as u32,
-        };
+        let ncols = qx_max as usize + 1;
+        let ncells = ncols * (2 * qy_max as usize + 1);
+        let (runs, cols) = runs(bins, kx0, ncols);
         let sums = ctx.storage("pair sums", ncells as u64 * 32);
         let staging = ctx.readback("pair sums staging", sums.size());
-        let (bins, runs, cols) = (
-            ctx.storage_init("pair bins", &gpu_bins(bins)),
-            ctx.storage_init("pair runs", &runs),
-            ctx.storage_init("pair columns", &cols),
-        );
-        let chunks: Vec<(wgpu::Buffer, wgpu::BindGroup)> = (0..=qx_max as usize)
-            .step_by(CHUNK)
-            .map(|ca0| {
-                let u = ctx.uniform("pair params", &params(ca0));
-                let bind = ctx.bind(&self.pipeline, &[&bins, &runs, &cols, &sums, &u]);
-                (u, bind)
-            })
-            .collect();
+        let inputs = [
+            &ctx.storage_init("pair bins", &gpu_bins(bins)),
+            &ctx.storage_init("pair runs", &runs),
+            &ctx.storage_init("pair columns", &cols),
+            &sums,
+        ];
+        let shape = Params {
+            ncols: ncols as u32,
+            qy_max: qy_max as u32,
+            ncells: ncells as u32,
+            ca0: 0,
+        };
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut cp = enc.begin_compute_pass(&Default::default());
-            cp.set_pipeline(&self.pipeline);
-            let [x, y, z] = linear_groups(ncells as usize, 64);
-            for (_, bind) in &chunks {
-                cp.set_bind_group(0, bind, &[]);
-                cp.dispatch_workgroups(x, y, z);
-            }
-        }
+        self.record(ctx, &mut enc, inputs, shape);
         enc.copy_buffer_to_buffer(&sums, 0, &staging, 0, sums.size());
         ctx.queue.submit([enc.finish()]);
-        let mut out = vec![[0.0f32; 4]; 2 * ncells as usize];
+        let mut out = vec![[0.0f32; 4]; 2 * ncells];
         ctx.read_into(&staging, &mut out)?;
         Ok(PairSumGrid {
             qx_max,
@@ -151,6 +125,57 @@ impl GpuPairSums {
             sums: out.into_iter().step_by(2).collect(),
         })
     }
+
+    /// One dispatch per chunk of CHUNK columns over every cell, each with its own `ca0`.
+    fn record(
+        &self,
+        ctx: &GpuContext,
+        enc: &mut wgpu::CommandEncoder,
+        inputs: [&wgpu::Buffer; 4],
+        shape: Params,
+    ) {
+        let binds: Vec<wgpu::BindGroup> = (0..shape.ncols as usize)
+            .step_by(CHUNK)
+            .map(|ca0| {
+                let params = Params {
+                    ca0: ca0 as u32,
+                    ..shape
+                };
+                let u = ctx.uniform("pair params", &params);
+                let [b, r, c, s] = inputs;
+                ctx.bind(&self.pipeline, &[b, r, c, s, &u])
+            })
+            .collect();
+        let mut cp = enc.begin_compute_pass(&Default::default());
+        cp.set_pipeline(&self.pipeline);
+        let [x, y, z] = linear_groups(shape.ncells as usize, 64);
+        for bind in &binds {
+            cp.set_bind_group(0, bind, &[]);
+            cp.dispatch_workgroups(x, y, z);
+        }
+    }
+}
+
+/// (kx0, qx_max, qy_max) of non-empty `bins`, or None for none; `Unsupported` when the sums
+/// (32 bytes a cell: sum and compensation) or the bins exceed one storage buffer.
+fn reach(ctx: &GpuContext, bins: &[PairBin]) -> Result<Option<(i64, i64, i64)>> {
+    let (Some(first), Some(last)) = (bins.first(), bins.last()) else {
+        return Ok(None);
+    };
+    let (ky0, ky1) = bins
+        .iter()
+        .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
+    let (qx_max, qy_max) = (last.kx - first.kx, ky1 - ky0);
+    let ncells = (qx_max + 1) as u128 * (2 * qy_max + 1) as u128;
+    let limit = ctx.device.limits().max_storage_buffer_binding_size as u128;
+    let bin_bytes = (bins.len() * std::mem::size_of::<GpuBin>()) as u128;
+    if ncells * 32 > limit || bin_bytes > limit {
+        return Err(GpuError::Unsupported(format!(
+            "pair sums: {} bins over {ncells} cells, more than one buffer of {limit} bytes holds",
+            bins.len()
+        )));
+    }
+    Ok(Some((first.kx, qx_max, qy_max)))
 }
 
 /// Shape error unless the bins are sorted by (kx, ky) without repeats, each with 1–3 intervals,
