@@ -2,8 +2,9 @@
 //! Fourier demultiplexing, GAP and GAP-TV de-aliasing (wavelet group shrinkage with an exact
 //! GPU selection of its threshold, TV denoising), the exact per-pixel non-negative unmixing
 //! and the joint reconstruction's Chambolle–Pock iterations — giving the CPU's answers within
-//! stated f32 tolerances (docs/gpu.md) — and the forward model's multiplex. Data stays on the
-//! GPU from the uploaded frame to the cube; buffers are made once per rig and reused per frame.
+//! stated f32 tolerances (docs/gpu.md) — and the forward model's multiplex and 4f-relay pair
+//! sums. Data stays on the GPU from the uploaded frame to the cube; buffers are made once per
+//! rig and reused per frame.
 
 pub mod backend;
 pub mod context;
@@ -15,6 +16,7 @@ pub mod gap;
 pub mod joint;
 pub mod mix;
 pub mod multiplex;
+pub mod pair_sums;
 pub mod reconstructor;
 pub mod select;
 pub mod tv;

@@ -183,27 +183,13 @@ mod tests {
     #[cfg(feature = "gpu")]
     #[test]
     fn the_forward_model_on_the_gpu_gives_the_cpus_frame() {
-        use crate::experiment::Experiment;
-        use crate::forward::Pipeline;
-        use crate::rig::Rig;
-        use crate::scene::Materials;
-        if let Err(specmux_gpu::GpuError::NoAdapter(e)) = specmux_gpu::GpuContext::new() {
-            return eprintln!("no GPU adapter found ({e}): GPU test skipped");
-        }
-        let frame = |device: &str| {
-            let toml = format!(
-                "[scene]\nsize = [48, 40]\n[rig.timing]\n[compute]\ndevice = \"{device}\"\n"
-            );
-            let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
-            let lib = specmux_core::spectral::Library::default_root();
-            let materials = Materials::load(&lib).unwrap();
-            let rig = Rig::build(&exp, &lib, &materials).unwrap();
-            let p = Pipeline::build(&exp, &rig, &materials).unwrap();
-            let on = format!("on the {}", device.to_uppercase());
-            assert!(p.explain().contains(&on), "{}", p.explain());
-            p.run().unwrap().0.frame
+        use crate::forward::gpu_tests::run;
+        let Some((cpu, explain)) = run("[rig.timing]\n", "cpu") else {
+            return;
         };
-        let (cpu, gpu) = (frame("cpu"), frame("gpu"));
+        assert!(explain.contains("on the CPU"), "{explain}");
+        let (gpu, explain) = run("[rig.timing]\n", "gpu").unwrap();
+        assert!(explain.contains("on the GPU"), "{explain}");
         let e = specmux_core::metrics::compare(&cpu, &gpu).unwrap().nrmse;
         eprintln!("forward model frame, GPU multiplex against CPU: NRMSE {e:.2e}");
         assert!(e < 1e-6, "{e:.2e}");
