@@ -1022,8 +1022,14 @@ mod tests {
         let grid = grid_for(&noisy);
         let extra = &grid[default_grid().len()..];
         assert_eq!(extra.len(), 6);
-        assert_eq!(extra[0].label(), "joint 20 it noise-weighted, crop 0.25 square");
-        assert_eq!(extra[5].label(), "joint 80 it discrepancy λ, crop 0.25 square");
+        assert_eq!(
+            extra[0].label(),
+            "joint 20 it noise-weighted, crop 0.25 square"
+        );
+        assert_eq!(
+            extra[5].label(),
+            "joint 80 it discrepancy λ, crop 0.25 square"
+        );
         // Each runs: the weighted data term and the discrepancy search, through the Reconstructor.
         let rows = work_precision(&noisy, &[extra[0], extra[3]], 1).unwrap();
         assert!(rows.iter().all(|r| r.psnr_db.is_finite()), "{rows:?}");

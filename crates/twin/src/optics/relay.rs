@@ -238,10 +238,12 @@ pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
         (Some(a), Some(b)) => (a.kx, b.kx),
         _ => (0, 0),
     };
+    // No bins (the openings pass nothing): one zero cell.
+    let ky = bins.first().map_or(0, |b| b.ky);
     let (ky0, ky1) = bins
         .iter()
-        .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
-    let (qx_max, qy_max) = (kx1 - kx0, (ky1 - ky0).max(0));
+        .fold((ky, ky), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
+    let (qx_max, qy_max) = (kx1 - kx0, ky1 - ky0);
     let h = (2 * qy_max + 1) as usize;
     let cols = (qx_max + 1) as usize;
     let kxs: Vec<i64> = bins.iter().map(|b| b.kx).collect();
@@ -408,6 +410,13 @@ mod tests {
         let ap = filter(4.1, n, PinholeShape::Circle).aperture(13.68, 20.0 / 128.0, 0.0, &light);
         let one = |_, _| Complex64::new(1.0, 0.0);
         passed_bins(&ap, &light, Illumination::Incoherent, (n, n), one).unwrap()
+    }
+
+    #[test]
+    fn no_bins_give_one_zero_cell() {
+        let s = pair_sums(&[]);
+        assert_eq!(s.reach(), (0, 0));
+        assert_eq!(s.at(0, 0), [Complex64::default(); 2]);
     }
 
     #[test]
