@@ -111,7 +111,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["fft"],
             &["fft_backend"],
             &["demux"],
-            &["wavelet", "select", "tv", "mix", "multiplex"],
+            &["wavelet", "select", "tv", "mix", "multiplex", "pair_sums"],
             &["gap"],
             &["unmix", "joint"],
             &["reconstructor"],
