@@ -39,8 +39,12 @@ pub struct ChannelRow {
     pub channel: usize,
     pub filter: String,
     pub carrier: [f64; 2],
+    /// The demultiplexed channel x̂ against the true channel.
     pub psnr_db: f64,
     pub ssim: f64,
+    /// The channel after de-aliasing (GAP, GAP-TV, the joint method's Fα; x̂ for `fourier`),
+    /// the one the cube is unmixed from, against the true channel.
+    pub final_psnr_db: f64,
     pub bound_psnr_db: f64,
     pub bound_ssim: f64,
     /// |ĝ|/½: the carrier amplitude the demultiplexer divides by, against the ideal pattern's
@@ -233,7 +237,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     let recon = reconstructor(exp, &rig, &sim)?;
     let t_setup = t.elapsed().as_secs_f64();
     let out = recon.run(&sim.frame, Some(&sim.exposed))?;
-    let (results, m_x, m_bound) = result_rows(exp, &recon, &sim, &out)?;
+    let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;
     let saturation = match &exp.rig.sensor {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
         None => None,
@@ -256,7 +260,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         size: [sim.frame.width, sim.frame.height],
         bands: sim.scene.grid.count,
         forward_stages,
-        channels: channel_rows(&rig, &recon, &m_x, &m_bound),
+        channels: channel_rows(&rig, &recon, &channel_metrics),
         calibration: CalibrationReport::new(&recon),
         basis,
         unmix: out.unmix,
@@ -293,13 +297,14 @@ fn warnings(rig: &Rig, frame: &FrameStats, results: &[ResultRow]) -> Vec<String>
 }
 
 /// The result table: demultiplexed and de-aliased channels, the crop bound, the cube and the
-/// spectral limit, each against its truth; also the channel metrics and the bound's.
+/// spectral limit, each against its truth; also the metrics of x̂, the de-aliased channels and the
+/// crop bound, for the channel table.
 fn result_rows(
     exp: &Experiment,
     recon: &Reconstructor,
     sim: &Simulated,
     out: &Reconstruction,
-) -> Result<(Vec<ResultRow>, Metrics, Metrics)> {
+) -> Result<(Vec<ResultRow>, [Metrics; 3])> {
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let t = Instant::now();
     let bound = recon.demux.crop_bound(&sim.channels);
@@ -342,15 +347,13 @@ fn result_rows(
             t_ideal,
         ),
     ];
-    Ok((rows, m_x, m_bound))
+    Ok((rows, [m_x, m_gap, m_bound]))
 }
 
-fn channel_rows(
-    rig: &Rig,
-    recon: &Reconstructor,
-    m_x: &Metrics,
-    m_bound: &Metrics,
-) -> Vec<ChannelRow> {
+/// Per channel: the demultiplexed, the de-aliased and the crop bound's metrics (`m`, in that
+/// order) and the carrier's gain.
+fn channel_rows(rig: &Rig, recon: &Reconstructor, m: &[Metrics; 3]) -> Vec<ChannelRow> {
+    let [m_x, m_gap, m_bound] = m;
     (0..rig.carriers.len())
         .map(|i| ChannelRow {
             channel: i,
@@ -358,6 +361,7 @@ fn channel_rows(
             carrier: [rig.carriers[i].fx, rig.carriers[i].fy],
             psnr_db: m_x.psnr_per_plane[i],
             ssim: m_x.ssim_per_plane[i],
+            final_psnr_db: m_gap.psnr_per_plane[i],
             bound_psnr_db: m_bound.psnr_per_plane[i],
             bound_ssim: m_bound.ssim_per_plane[i],
             carrier_gain: carrier_gain(&recon.calibration.carriers[i]),
@@ -402,17 +406,26 @@ impl RunReport {
             );
         }
         s += &format!(
-            "\n{:<8} {:<16} {:>12} {:>10} {:>8} {:>10} {:>8} {:>7}\n",
-            "channel", "filter", "carrier", "PSNR dB", "SSIM", "bound dB", "bound", "gain"
+            "\n{:<8} {:<16} {:>12} {:>10} {:>8} {:>9} {:>10} {:>8} {:>7}\n",
+            "channel",
+            "filter",
+            "carrier",
+            "PSNR dB",
+            "SSIM",
+            "final dB",
+            "bound dB",
+            "bound",
+            "gain"
         );
         for c in &self.channels {
             s += &format!(
-                "{:<8} {:<16} {:>12} {:>10.2} {:>8.4} {:>10.2} {:>8.4} {:>7.3}\n",
+                "{:<8} {:<16} {:>12} {:>10.2} {:>8.4} {:>9.2} {:>10.2} {:>8.4} {:>7.3}\n",
                 c.channel,
                 c.filter,
                 format!("({},{})", c.carrier[0], c.carrier[1]),
                 c.psnr_db,
                 c.ssim,
+                c.final_psnr_db,
                 c.bound_psnr_db,
                 c.bound_ssim,
                 c.carrier_gain
