@@ -243,7 +243,10 @@ fn raw_frames_are_calibrated_back_to_the_noiseless_frame() {
 fn the_channel_table_reports_the_de_aliased_channels_beside_the_demultiplexed() {
     let lib = Library::default_root();
     let (fourier, _) = run::run(&experiment(""), &lib).unwrap();
-    assert!(fourier.channels.iter().all(|c| c.final_psnr_db == c.psnr_db));
+    assert!(fourier
+        .channels
+        .iter()
+        .all(|c| c.final_psnr_db == c.psnr_db));
     let text = "[scene]\nsource = \"dead-leaves\"\nsize = [64, 64]\n[reconstruct.gap]\nmethod = \"joint\"\n";
     let (joint, _) = run::run(&Experiment::from_toml(text, "test.toml").unwrap(), &lib).unwrap();
     for c in &joint.channels {

@@ -659,13 +659,23 @@ pub(crate) mod gpu_tests {
     use crate::scene::Materials;
     use specmux_core::Cube;
 
+    /// A GPU context, or None (said in one line) when no adapter opens; any other failure to
+    /// open one fails the test.
+    pub fn context() -> Option<specmux_gpu::GpuContext> {
+        match specmux_gpu::GpuContext::new() {
+            Ok(ctx) => Some(ctx),
+            Err(specmux_gpu::GpuError::NoAdapter(e)) => {
+                eprintln!("no GPU adapter found ({e}): GPU test skipped");
+                None
+            }
+            Err(e) => panic!("a GPU adapter exists but could not be opened: {e}"),
+        }
+    }
+
     /// The frame and the stages' lines of a 48 × 40 scene through `rig` (TOML sections) with
     /// `[compute] device`; None (said in one line) when no GPU adapter opens.
     pub fn run(rig: &str, device: &str) -> Option<(Cube, String)> {
-        if let Err(specmux_gpu::GpuError::NoAdapter(e)) = specmux_gpu::GpuContext::new() {
-            eprintln!("no GPU adapter found ({e}): GPU test skipped");
-            return None;
-        }
+        context()?;
         let toml = format!("[scene]\nsize = [48, 40]\n{rig}[compute]\ndevice = \"{device}\"\n");
         let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
         let lib = specmux_core::spectral::Library::default_root();

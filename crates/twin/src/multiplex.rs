@@ -147,12 +147,8 @@ mod tests {
     #[cfg(feature = "gpu")]
     #[test]
     fn the_gpu_multiplex_matches_the_cpu() {
-        let ctx = match specmux_gpu::GpuContext::new() {
-            Ok(c) => c,
-            Err(specmux_gpu::GpuError::NoAdapter(e)) => {
-                return eprintln!("no GPU adapter found ({e}): GPU test skipped")
-            }
-            Err(e) => panic!("a GPU adapter exists but could not be opened: {e}"),
+        let Some(ctx) = crate::forward::gpu_tests::context() else {
+            return;
         };
         hand_case(&GpuMultiplexer::new(&ctx, (2, 1, 2)).unwrap());
         let mut rng = rand_pcg::Pcg64::seed_from_u64(5);

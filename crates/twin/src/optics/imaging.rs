@@ -1339,12 +1339,8 @@ mod tests {
     #[test]
     fn gpu_pair_sums_give_the_cpus_relay_and_patterns() {
         use crate::optics::relay::{gpu_error, GpuPairSummer};
-        let ctx = match specmux_gpu::GpuContext::new() {
-            Ok(c) => c,
-            Err(specmux_gpu::GpuError::NoAdapter(e)) => {
-                return eprintln!("no GPU adapter found ({e}): GPU test skipped")
-            }
-            Err(e) => panic!("a GPU adapter exists but could not be opened: {e}"),
+        let Some(ctx) = crate::forward::gpu_tests::context() else {
+            return;
         };
         let gpu: Arc<dyn PairSummer> = Arc::new(GpuPairSummer::new(&ctx));
         let c = default_layout();

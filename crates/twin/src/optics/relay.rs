@@ -587,14 +587,7 @@ mod tests {
     /// The GPU's pair summer, or None (said in one line) without an adapter.
     #[cfg(feature = "gpu")]
     fn gpu() -> Option<GpuPairSummer> {
-        match specmux_gpu::GpuContext::new() {
-            Ok(ctx) => Some(GpuPairSummer::new(&ctx)),
-            Err(specmux_gpu::GpuError::NoAdapter(e)) => {
-                eprintln!("no GPU adapter found ({e}): GPU test skipped");
-                None
-            }
-            Err(e) => panic!("a GPU adapter exists but could not be opened: {e}"),
-        }
+        crate::forward::gpu_tests::context().map(|ctx| GpuPairSummer::new(&ctx))
     }
 
     /// The GPU's sums on the hand-solved three discs (OTF 2/3 and 1/3) within 1e-5 of the
