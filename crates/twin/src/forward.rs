@@ -4,7 +4,7 @@
 //! before the one that makes its input; a step the experiment does not ask for is not built.
 
 use crate::experiment::Experiment;
-use crate::multiplex::{for_device, Multiplexer};
+use crate::multiplex::{for_device, Multiplexer, OpenDevice};
 use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
@@ -136,6 +136,7 @@ fn on_device(exp: &Experiment, e: specmux_core::Error) -> specmux_core::Error {
 impl Pipeline {
     /// The stages this experiment needs, in light-path order.
     pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
+        let device = OpenDevice::open(exp.compute.device).map_err(|e| on_device(exp, e))?;
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
@@ -148,9 +149,7 @@ impl Pipeline {
                 rig.height,
             )?;
             let chain = match optics.fourier_filter {
-                Some(_) => chain.with_pair_summer(
-                    pair_summer_for(exp.compute.device).map_err(|e| on_device(exp, e))?,
-                ),
+                Some(_) => chain.with_pair_summer(pair_summer_for(&device)),
                 None => chain,
             };
             PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
@@ -174,11 +173,8 @@ impl Pipeline {
             patterns,
             timing: exp.rig.timing.as_ref().map(timing_stage).transpose()?,
             multiplex: MultiplexStage {
-                device: for_device(
-                    exp.compute.device,
-                    (rig.width, rig.height, rig.imaged_carriers.len()),
-                )
-                .map_err(|e| on_device(exp, e))?,
+                device: for_device(&device, (rig.width, rig.height, rig.imaged_carriers.len()))
+                    .map_err(|e| on_device(exp, e))?,
             },
             sensor: match &exp.rig.sensor {
                 Some(c) => Some(SensorStage {

@@ -28,7 +28,7 @@ pub fn multiplex(z: &Cube, s: &Cube) -> Result<Cube> {
 
 /// The forward model's multiplex on some device: y = Σ_k z_k ⊙ s̃_k. `CpuMultiplex` and,
 /// behind the `gpu` feature, `GpuMultiplexer` implement it; `[compute] device` picks one
-/// (`for_device`), and the same tests check both.
+/// (`OpenDevice`, `for_device`), and the same tests check both.
 pub trait Multiplexer: Send + Sync {
     /// y of the images z (one per pattern) against the patterns s̃ (the same shape).
     fn multiplex(&self, z: &Cube, s: &Cube) -> Result<Cube>;
@@ -81,17 +81,44 @@ impl Multiplexer for GpuMultiplexer {
     }
 }
 
-/// The multiplexer `device` names for `planes` images of w × h: the CPU; with the `gpu`
-/// feature the GPU for `gpu` (an error without an adapter) and `auto` (the CPU, said in one
-/// line, without one); without the feature the CPU (the reconstruction reports the missing
-/// feature).
+/// The device `[compute] device` names, opened once per pipeline: its GPU stages (the multiplex,
+/// the relay's pair sums) share one context, and `auto` says once that it stays on the CPU.
+pub struct OpenDevice {
+    #[cfg(feature = "gpu")]
+    gpu: Option<specmux_gpu::GpuContext>,
+}
+
+impl OpenDevice {
+    /// The CPU for `cpu`; with the `gpu` feature the GPU for `gpu` (an error without an
+    /// adapter) and for `auto` (the CPU, said in one line, without one); without the feature
+    /// the CPU (the reconstruction reports the missing feature).
+    pub fn open(device: specmux_core::reconstructor::ComputeDevice) -> Result<OpenDevice> {
+        #[cfg(feature = "gpu")]
+        return Ok(OpenDevice {
+            gpu: specmux_gpu::backend::open(device)?,
+        });
+        #[cfg(not(feature = "gpu"))]
+        {
+            let _ = device;
+            Ok(OpenDevice {})
+        }
+    }
+
+    /// The GPU's context, if the device is one.
+    #[cfg(feature = "gpu")]
+    pub fn gpu(&self) -> Option<&specmux_gpu::GpuContext> {
+        self.gpu.as_ref()
+    }
+}
+
+/// The multiplexer on `device` for `planes` images of w × h.
 pub fn for_device(
-    device: specmux_core::reconstructor::ComputeDevice,
+    device: &OpenDevice,
     shape: (usize, usize, usize),
 ) -> Result<Box<dyn Multiplexer>> {
     #[cfg(feature = "gpu")]
-    if let Some(ctx) = specmux_gpu::backend::open(device)? {
-        return Ok(Box::new(GpuMultiplexer::new(&ctx, shape)?));
+    if let Some(ctx) = device.gpu() {
+        return Ok(Box::new(GpuMultiplexer::new(ctx, shape)?));
     }
     let _ = (device, shape);
     Ok(Box::new(CpuMultiplex))
@@ -119,7 +146,8 @@ mod tests {
     #[test]
     fn the_cpu_multiplex_sums_the_modulated_images() {
         hand_case(&CpuMultiplex);
-        let m = for_device(specmux_core::reconstructor::ComputeDevice::Cpu, (2, 1, 2)).unwrap();
+        let cpu = OpenDevice::open(specmux_core::reconstructor::ComputeDevice::Cpu).unwrap();
+        let m = for_device(&cpu, (2, 1, 2)).unwrap();
         assert_eq!(m.device(), "cpu");
         hand_case(m.as_ref());
     }

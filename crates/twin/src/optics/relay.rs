@@ -355,17 +355,14 @@ impl PairSummer for GpuPairSummer {
     }
 }
 
-/// The pair summer `device` names: the CPU; with the `gpu` feature the GPU for `gpu` (an error
-/// without an adapter) and `auto` (the CPU, said in one line, without one).
-pub fn pair_summer_for(
-    device: specmux_core::reconstructor::ComputeDevice,
-) -> Result<Arc<dyn PairSummer>> {
+/// The pair summer on `device` (the GPU's when it is one).
+pub fn pair_summer_for(device: &crate::multiplex::OpenDevice) -> Arc<dyn PairSummer> {
     #[cfg(feature = "gpu")]
-    if let Some(ctx) = specmux_gpu::backend::open(device)? {
-        return Ok(Arc::new(GpuPairSummer::new(&ctx)));
+    if let Some(ctx) = device.gpu() {
+        return Arc::new(GpuPairSummer::new(ctx));
     }
     let _ = device;
-    Ok(Arc::new(CpuPairSums))
+    Arc::new(CpuPairSums)
 }
 
 /// Per component, the largest |GPU − CPU| over the cells relative to the CPU's largest |sum|
