@@ -49,9 +49,11 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     ),
     (
         "twin",
-        // The light path, then the calibration captures made with it; experiment composes the
-        // section configs of all of these; rig, forward and run consume it.
+        // The compute device the GPU stages share, the light path, then the calibration captures
+        // made with it; experiment composes the section configs of all of these; rig, forward
+        // and run consume it.
         &[
+            &["device"],
             &["scene"],
             &["optics"],
             &["timing"],

@@ -3,8 +3,9 @@
 //! timing) → frame → optional sensor. Each step takes its input by type, so no step can run
 //! before the one that makes its input; a step the experiment does not ask for is not built.
 
+use crate::device::OpenDevice;
 use crate::experiment::Experiment;
-use crate::multiplex::{for_device, Multiplexer, OpenDevice};
+use crate::multiplex::{for_device, Multiplexer};
 use crate::optics::fourier_filter::FourierFilterConfig;
 use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};

@@ -5,6 +5,7 @@
 
 pub mod budget;
 pub mod captures;
+pub mod device;
 pub mod experiment;
 pub mod forward;
 pub mod multiplex;

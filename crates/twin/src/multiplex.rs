@@ -1,6 +1,7 @@
 //! The monochrome camera sums the modulated images: y = Σ_k z_k ⊙ s̃_k. Used by the forward
 //! model for the scene's frame and by the calibration captures for the white target's.
 
+use crate::device::OpenDevice;
 use rayon::prelude::*;
 use specmux_core::{Cube, Result};
 
@@ -28,7 +29,7 @@ pub fn multiplex(z: &Cube, s: &Cube) -> Result<Cube> {
 
 /// The forward model's multiplex on some device: y = Σ_k z_k ⊙ s̃_k. `CpuMultiplex` and,
 /// behind the `gpu` feature, `GpuMultiplexer` implement it; `[compute] device` picks one
-/// (`OpenDevice`, `for_device`), and the same tests check both.
+/// (`device::OpenDevice`, `for_device`), and the same tests check both.
 pub trait Multiplexer: Send + Sync {
     /// y of the images z (one per pattern) against the patterns s̃ (the same shape).
     fn multiplex(&self, z: &Cube, s: &Cube) -> Result<Cube>;
@@ -78,36 +79,6 @@ impl Multiplexer for GpuMultiplexer {
     }
     fn device(&self) -> &'static str {
         "gpu"
-    }
-}
-
-/// The device `[compute] device` names, opened once per pipeline: its GPU stages (the multiplex,
-/// the relay's pair sums) share one context, and `auto` says once that it stays on the CPU.
-pub struct OpenDevice {
-    #[cfg(feature = "gpu")]
-    gpu: Option<specmux_gpu::GpuContext>,
-}
-
-impl OpenDevice {
-    /// The CPU for `cpu`; with the `gpu` feature the GPU for `gpu` (an error without an
-    /// adapter) and for `auto` (the CPU, said in one line, without one); without the feature
-    /// the CPU (the reconstruction reports the missing feature).
-    pub fn open(device: specmux_core::reconstructor::ComputeDevice) -> Result<OpenDevice> {
-        #[cfg(feature = "gpu")]
-        return Ok(OpenDevice {
-            gpu: specmux_gpu::backend::open(device)?,
-        });
-        #[cfg(not(feature = "gpu"))]
-        {
-            let _ = device;
-            Ok(OpenDevice {})
-        }
-    }
-
-    /// The GPU's context, if the device is one.
-    #[cfg(feature = "gpu")]
-    pub fn gpu(&self) -> Option<&specmux_gpu::GpuContext> {
-        self.gpu.as_ref()
     }
 }
 

@@ -356,7 +356,7 @@ impl PairSummer for GpuPairSummer {
 }
 
 /// The pair summer on `device` (the GPU's when it is one).
-pub fn pair_summer_for(device: &crate::multiplex::OpenDevice) -> Arc<dyn PairSummer> {
+pub fn pair_summer_for(device: &crate::device::OpenDevice) -> Arc<dyn PairSummer> {
     #[cfg(feature = "gpu")]
     if let Some(ctx) = device.gpu() {
         return Arc::new(GpuPairSummer::new(ctx));
