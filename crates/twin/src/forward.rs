@@ -141,18 +141,14 @@ impl Pipeline {
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
-            let optics = exp.rig.optics();
             let chain = Chain::new(
-                &optics,
+                &exp.rig.optics(),
                 &rig.imaged_carriers,
                 &rig.pattern_lights(exp)?,
                 rig.width,
                 rig.height,
-            )?;
-            let chain = match optics.fourier_filter {
-                Some(_) => chain.with_pair_summer(pair_summer_for(&device)),
-                None => chain,
-            };
+            )?
+            .with_pair_summer(pair_summer_for(&device));
             PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
         } else {
             PatternSteps::Ideal(IdealPatternStage {
