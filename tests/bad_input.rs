@@ -188,3 +188,25 @@ fn sensor_and_timing_must_agree_on_the_exposure() {
     let (ok, err) = simulate(&d, toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.sensor.exposure_s", "0.02"]);
 }
+
+#[test]
+fn an_iteration_count_beside_the_default_auto_method_is_refused() {
+    let d = tmpdir("bad-auto-iterations");
+    for (toml, key) in [
+        (
+            "[reconstruct.gap]\niterations = 50\n",
+            "reconstruct.gap.iterations",
+        ),
+        (
+            "[reconstruct.gap]\nmethod = \"auto\"\n[reconstruct.joint]\niterations = 7\n",
+            "reconstruct.joint.iterations",
+        ),
+    ] {
+        let (ok, err) = simulate(&d, &format!("{SMALL}{toml}"), None);
+        assert_one_line_error(ok, &err, &["exp.toml", key, "\"auto\" (the default)"]);
+    }
+    // Naming the method makes the count apply.
+    let toml = format!("{SMALL}[reconstruct.gap]\nmethod = \"gap\"\niterations = 5\n");
+    let (ok, err) = simulate(&d, &toml, None);
+    assert!(ok, "{err}");
+}

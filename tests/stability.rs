@@ -858,6 +858,7 @@ fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
     let vary = format!("reconstruct.gap.iterations={}", values.join(";"));
     let child = Command::new(env!("CARGO_BIN_EXE_specmux"))
         .args(["sweep", "dead-leaves", "--size", "64", "--vary", &vary])
+        .args(["--vary", "reconstruct.gap.method=gap"])
         .args(["--out", out.to_str().unwrap()])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())

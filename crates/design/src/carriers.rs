@@ -577,7 +577,7 @@ fn write_outputs(a: &CarrierArgs, d: &CarrierDesign, lib: &Library) -> Result<St
         .find(|e| e.scene.size == [a.size, a.size]);
     if let Some(s) = sim.filter(scenes::is_procedural) {
         let e = experiment_for(&s, c, false);
-        let text = toml::to_string(&e).map_err(|err| Error::Toml {
+        let text = toml::to_string(&e.to_table()?).map_err(|err| Error::Toml {
             file: "experiment.toml".into(),
             msg: err.to_string(),
         })?;

@@ -255,7 +255,11 @@ fn gap_and_gap_tv_runs_match_the_core() {
 fn a_non_finite_result_is_an_error() {
     let Some(ctx) = common::context() else { return };
     let (y, s, mut seed) = case();
-    let gap = Gap::new(&s, &GapConfig::default(), "t").unwrap();
+    let cfg = GapConfig {
+        method: Method::Gap,
+        ..Default::default()
+    };
+    let gap = Gap::new(&s, &cfg, "t").unwrap();
     seed.data[100] = f32::INFINITY;
     let frame = common::upload(&ctx, "frame", &y.data);
     let est = common::upload(&ctx, "estimate", &seed.data);

@@ -967,6 +967,7 @@ mod tests {
     fn crop_sweep_is_finite_and_the_bound_improves_with_the_crop() {
         let sim = tiny();
         let cfg = GapConfig {
+            method: Method::Gap,
             iterations: 3,
             levels: 2,
             ..Default::default()

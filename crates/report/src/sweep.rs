@@ -77,10 +77,7 @@ fn set(doc: &mut toml::Table, key: &str, value: toml::Value) {
 /// The experiment with the given (key, value) pairs applied, parsed and validated as a file
 /// would be (an unknown key or a value out of range is refused with its name).
 pub fn with_values(base: &Experiment, set_to: &[(String, toml::Value)]) -> Result<Experiment> {
-    let mut doc = toml::Table::try_from(base).map_err(|e| Error::Toml {
-        file: base.file.clone(),
-        msg: e.to_string(),
-    })?;
+    let mut doc = base.to_table()?;
     for (k, v) in set_to {
         set(&mut doc, k, v.clone());
     }

@@ -15,6 +15,7 @@ use crate::sensor::{CameraConfig, SensorConfig};
 use crate::timing::TimingConfig;
 use serde::{Deserialize, Serialize};
 use specmux_core::carriers::{self, Carrier, CarrierConfig};
+use specmux_core::gap::Method;
 use specmux_core::reconstructor::{ComputeDevice, ReconConfig};
 use specmux_core::spectral::{Curve, Library};
 use specmux_core::{Error, Result};
@@ -37,6 +38,9 @@ pub struct Experiment {
     #[serde(skip)]
     pub written: toml::Table,
 }
+
+/// The keys whose value `[reconstruct.gap] method = "auto"` chooses.
+const AUTO_CHOSEN: [&str; 2] = ["reconstruct.gap.iterations", "reconstruct.joint.iterations"];
 
 /// `[compute]`: the device the reconstruction runs on ("cpu", the default; "gpu"; "auto").
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -127,6 +131,29 @@ impl Experiment {
         specmux_core::spectral::library::curve_file(&path, name)
     }
 
+    /// The experiment as a TOML table that reads back to the same experiment (what a sweep
+    /// edits and the design tools write): with `method = "auto"`, the iteration counts that
+    /// auto chooses are left out unless the file wrote them.
+    pub fn to_table(&self) -> Result<toml::Table> {
+        let mut doc = toml::Table::try_from(self).map_err(|e| Error::Toml {
+            file: self.file.clone(),
+            msg: e.to_string(),
+        })?;
+        if self.reconstruct.gap.method == Method::Auto {
+            for key in AUTO_CHOSEN.iter().filter(|k| !self.wrote(k)) {
+                let (section, name) = key.rsplit_once('.').expect("a dotted key");
+                let mut t = Some(&mut doc);
+                for p in section.split('.') {
+                    t = t.and_then(|t| t.get_mut(p)).and_then(|v| v.as_table_mut());
+                }
+                if let Some(t) = t {
+                    t.remove(name);
+                }
+            }
+        }
+        Ok(doc)
+    }
+
     /// Read an experiment file.
     pub fn load(path: &Path) -> Result<Experiment> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
@@ -162,6 +189,7 @@ impl Experiment {
         }
         self.validate_carrier_count(n)?;
         self.reconstruct.validate(f, n)?;
+        self.validate_auto_keys()?;
         self.calibration.validate(f)?;
         self.validate_rig(n)?;
         let [w, h] = self.scene.size;
@@ -170,6 +198,31 @@ impl Experiment {
         carriers::check_layout(&self.rig.carriers.carriers(), crop, w, h, f)?;
         let (design, _) = self.carriers()?;
         carriers::check_layout(&design, crop, w, h, f)
+    }
+
+    /// `method = "auto"` (the default) chooses the iteration count itself, so an iteration
+    /// count written beside it would be silently overridden: refused, naming the method to set.
+    fn validate_auto_keys(&self) -> Result<()> {
+        if self.reconstruct.gap.method != Method::Auto {
+            return Ok(());
+        }
+        let (gap, joint) = (&self.reconstruct.gap, &self.reconstruct.joint);
+        for (key, value, methods) in [
+            (AUTO_CHOSEN[0], gap.iterations, "\"gap\" or \"gap-tv\""),
+            (AUTO_CHOSEN[1], joint.iterations, "\"joint\""),
+        ] {
+            if self.wrote(key) {
+                return Err(Error::config(
+                    &self.file,
+                    key,
+                    value,
+                    &format!(
+                        "is chosen by reconstruct.gap.method = \"auto\" (the default); set the method to {methods} to fix it"
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     fn validate_carrier_count(&self, n: usize) -> Result<()> {
