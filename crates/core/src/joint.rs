@@ -811,7 +811,7 @@ impl Joint {
             .iter()
             .fold((0.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)));
         cube.data.par_iter_mut().for_each(|v| *v = v.max(0.0));
-        let violation = if hi > 0.0 { (-lo / hi) as f64 } else { 0.0 };
+        let violation = if hi > 0.0 && lo < 0.0 { (-lo / hi) as f64 } else { 0.0 };
         Ok((cube, violation))
     }
 
