@@ -38,6 +38,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SCENES = {"dead-leaves": 7, "shaded-objects": 11}
 # specmux's default layout (docs/model.md), cycles/pixel (fx, fy), phase 0.
 CARRIERS = [(0.25, 0.0), (0.0, 0.25), (0.25, 0.25), (-0.25, 0.25), (0.5, 0.25), (0.25, 0.5)]
+# The e^{+iω·p} term of an ideal pattern 1 + cos(ω·p): amplitude ½.
+GAIN = 0.5
 GRID_NM = np.arange(400.0, 701.0, 10.0)
 
 
@@ -61,7 +63,7 @@ def evaluate(c, x):
     return np.interp(x, c[0], c[1], left=0.0, right=0.0)
 
 
-def channel_response(spectra, filters, light, qe):
+def channel_response(filters, light, qe):
     """A (channels × bands): ∫ T_i L QE hat_b dλ, exact (3-point Gauss–Legendre between the
     knots of all factors integrates their degree-4 product exactly), scaled so that a white
     reflector gives 1 in the brightest channel."""
@@ -104,9 +106,10 @@ def unmix_matrices(a, b, eta):
 
 
 class Demux:
-    """Square crop·N window around each carrier bin of the frame's real FFT, divided by the
-    ideal gain ½, and the real part of its inverse: the inverse of the window's Hermitian part,
-    columns kx ∈ [0, ⌈w/2⌉] only (ifft along y, then irfft along x)."""
+    """Square window of w = crop·n bins around each carrier bin of the frame's real FFT, divided
+    by the ideal gain ½ (phase 0), and the real part of its inverse, computed as the inverse of
+    the window's Hermitian part on its columns kx ∈ [0, ⌊w/2⌋] only (ifft along y, then irfft
+    along x). The default carriers lie on bins, so nothing is left to demodulate."""
 
     def __init__(self, n, crop):
         w = round(crop * n)
@@ -124,13 +127,12 @@ class Demux:
         self.ky = np.where(self.conj, -ky % n, ky)
         self.kx = np.where(self.conj, -kx % n, kx)
         self.rows = d % n
-        self.gain = 0.5
 
     def run(self, frame):
         """x̂ (channels × n × n, float32) of a float32 frame."""
         y = np.fft.rfft2(frame)
         z = y[self.ky, self.kx]
-        z = np.where(self.conj, z.conj(), z) * self.inside / self.gain
+        z = np.where(self.conj, z.conj(), z) * self.inside / GAIN
         # Hermitian part (Z(d) + Z*(−d))/2 on dx ≥ 0; the window's array holds d and −d.
         mirror = z[:, ::-1, ::-1].conj()
         herm = 0.5 * (z + mirror)[:, :, self.half:]
@@ -139,10 +141,11 @@ class Demux:
         return np.fft.irfft(np.fft.ifft(cols, axis=1), n=self.n, axis=2)
 
 
-def unmix(p32, xhat):
-    """The unconstrained cube P x̂ (bands × n × n): one matrix product for every pixel."""
+def unmix(p32, xhat, out=None):
+    """The unconstrained cube P x̂ (bands × n × n): one matrix product for every pixel, written
+    into `out` (bands × n·n, float32) when given, as a real-time loop reuses its output."""
     c, h, w = xhat.shape
-    return (p32 @ xhat.reshape(c, -1)).reshape(-1, h, w)
+    return np.matmul(p32, xhat.reshape(c, -1), out=out).reshape(-1, h, w)
 
 
 def exact_pixel(f, h, b, xhat):
@@ -169,7 +172,8 @@ def psnr(truth, estimate):
 
 
 def median_time(fn, repeats):
-    """Median wall seconds of `repeats` calls, and the 1-minute load average before and after."""
+    """Wall seconds of `repeats` calls (median, min, max) and the 1-minute load average before
+    and after."""
     load = [os.getloadavg()[0]]
     times = []
     for _ in range(repeats):
@@ -177,7 +181,7 @@ def median_time(fn, repeats):
         fn()
         times.append(time.perf_counter() - t0)
     load.append(os.getloadavg()[0])
-    return statistics.median(times), load
+    return (statistics.median(times), min(times), max(times)), load
 
 
 def specmux_outputs(binary, scene, work, repeats):
@@ -200,16 +204,19 @@ def specmux_outputs(binary, scene, work, repeats):
         stages["reconstruction"].append(report["reconstruction_seconds"])
     arrays = {k: np.load(d / f"{k}.npy") for d, k in
               [(sim, "frame"), (sim, "truth"), (demo, "channels"), (demo, "cube")]}
-    assert np.array_equal(arrays["frame"], np.load(demo / "frame.npy")), "frames differ"
+    if not np.array_equal(arrays["frame"], np.load(demo / "frame.npy")):
+        sys.exit(f"numpy_pipeline: {scene}: simulate and demo recorded different frames")
     return arrays, {k: statistics.median(v) for k, v in stages.items()}
 
 
 def compare(scene, args, rig):
     """Everything printed for one scene."""
-    a, b, f, h, p = rig
+    a, p = rig[0], rig[4]
     data, sm = specmux_outputs(args.specmux, scene, args.work, args.specmux_repeats)
     frame, truth = data["frame"], data["truth"]
-    demux = Demux(frame.shape[0], rig_crop(args))
+    if frame.shape[0] != frame.shape[1]:
+        sys.exit(f"numpy_pipeline: frame {frame.shape}: only square frames are implemented")
+    demux = Demux(frame.shape[0], args.design["reconstruct"]["crop"])
     xhat = demux.run(frame)
     cube = unmix(p.astype(np.float32), xhat)
     x_true = np.einsum("cb,bhw->chw", a, truth.astype(np.float64))
@@ -232,7 +239,7 @@ def exact_check(args, rig, xhat, cube, data, neg):
     unconstrained cube has a negative band (all of them, or a random `--nnls-pixels` sample):
     numpy's exact cube against the truth, and the same solver fed specmux's x̂ against specmux's
     cube (both solvers exact: they differ by round-off only)."""
-    a, b, f, h, p = rig
+    b, f, h = rig[1], rig[2], rig[3]
     idx = np.flatnonzero(neg.ravel())
     if args.nnls_pixels:
         rng = np.random.default_rng(0)
@@ -243,55 +250,64 @@ def exact_check(args, rig, xhat, cube, data, neg):
     per_pixel = (time.perf_counter() - t0) / len(idx)
     theirs = np.array([exact_pixel(f, h, b, x) for x in flat(data["channels"]).T]).T
     gap = np.abs(theirs - flat(data["cube"]))
-    exact = cube.reshape(len(cube), -1).copy()
-    exact[:, idx] = ours
-    which = "all" if len(idx) == neg.sum() else "a sample of"
-    print(f"exact non-negative fit on {which} {len(idx)} constrained pixels (scipy NNLS of the "
-          f"LDP form, {per_pixel * 1e6:.0f} µs/pixel in a Python loop): numpy cube "
-          f"{psnr(data['truth'], exact.reshape(cube.shape)):.2f} dB against the truth; "
-          f"NNLS on specmux's x̂ against specmux's cube: max |Δ| {gap.max():.2e}, "
-          f"99.9th percentile {np.percentile(gap, 99.9):.2e}, median {np.median(gap):.2e} "
-          f"(cube peak {data['cube'].max():.3f})")
+    truth = flat(data["truth"])
+    rmse = lambda c: np.sqrt(((c - truth) ** 2).mean())
+    if len(idx) == neg.sum():
+        exact = cube.reshape(len(cube), -1).copy()
+        exact[:, idx] = ours
+        whole = f"; numpy's exact cube {psnr(data['truth'], exact.reshape(cube.shape)):.2f} dB"
+    else:
+        whole = ""
+    print(f"exact non-negative fit of {len(idx)} of the {neg.sum()} constrained pixels (scipy NNLS "
+          f"of the LDP form, {per_pixel * 1e6:.0f} µs/pixel in a Python loop): RMSE to the truth "
+          f"there: unconstrained {rmse(flat(cube)):.4f}, numpy exact {rmse(ours):.4f}, specmux "
+          f"{rmse(flat(data['cube'])):.4f}{whole}; NNLS on specmux's x̂ against specmux's cube: "
+          f"max |Δ| {gap.max():.2e}, 99.9th percentile {np.percentile(gap, 99.9):.2e}, median "
+          f"{np.median(gap):.2e} (cube peak {data['cube'].max():.3f})")
 
 
 def timings(args, demux, p, frame, sm):
     """Medians of numpy's stages beside specmux `demo`'s stage seconds."""
     p32 = p.astype(np.float32)
     xhat = demux.run(frame)
+    out = np.empty((p32.shape[0], xhat[0].size), dtype=np.float32)
     d, ld = median_time(lambda: demux.run(frame), args.repeats)
-    u, lu = median_time(lambda: unmix(p32, xhat), args.repeats)
-    w, lw = median_time(lambda: unmix(p32, demux.run(frame)), args.repeats)
-    print(f"numpy medians of {args.repeats}: demultiplex {d * 1e3:.1f} ms (load {ld[0]:.2f}→{ld[1]:.2f}), "
-          f"unconstrained unmix {u * 1e3:.1f} ms (load {lu[0]:.2f}→{lu[1]:.2f}), "
-          f"whole {w * 1e3:.1f} ms (load {lw[0]:.2f}→{lw[1]:.2f})")
+    u, lu = median_time(lambda: unmix(p32, xhat, out), args.repeats)
+    w, lw = median_time(lambda: unmix(p32, demux.run(frame), out), args.repeats)
+    fmt = lambda t, l: (f"{t[0] * 1e3:.1f} ms [{t[1] * 1e3:.1f}, {t[2] * 1e3:.1f}] "
+                        f"(load {l[0]:.2f}→{l[1]:.2f})")
+    print(f"numpy medians of {args.repeats} [min, max]: demultiplex {fmt(d, ld)}, unconstrained "
+          f"unmix, output reused {fmt(u, lu)}, whole {fmt(w, lw)}")
     print(f"specmux demo medians of {args.specmux_repeats} (stage seconds of report.json, first "
           f"frame of a process, Fourier method): demultiplex {sm['demultiplex'] * 1e3:.1f} ms, "
           f"exact non-negative unmix {sm['unmix'] * 1e3:.1f} ms, "
           f"reconstruction {sm['reconstruction'] * 1e3:.1f} ms")
 
 
-def rig_crop(args):
-    """The design's crop (scenes/prototype.toml)."""
-    return args.design["reconstruct"]["crop"]
-
-
 def build_rig(args):
     """A, B, F, H, P from the curves named in scenes/prototype.toml and the spectra folder."""
     design = args.design
-    if design["reconstruct"]["window"] != "square":
-        sys.exit("numpy_pipeline: only the square window is implemented")
+    if design["reconstruct"]["window"] != "square" or "carriers" in design["rig"]:
+        sys.exit("numpy_pipeline: only the square window and the default carriers are implemented")
     names = design["rig"]["wheel"]["filters"]
     filters = [curve(args.spectra, n) for n in names]
     light = curve(args.spectra, design["scene"]["illuminant"])
     qe = curve(args.spectra, design["rig"]["camera"]["qe"])
-    a = channel_response(args.spectra, filters, light, qe)
+    a = channel_response(filters, light, qe)
     b = train_basis(args.spectra, design["reconstruct"]["basis"])
     return (a, b, *unmix_matrices(a, b, design["reconstruct"]["eta"]))
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, its errors in one line without the usage."""
+
+    def error(self, message):
+        sys.exit(f"numpy_pipeline: {message}")
+
+
 def parse_args():
     """Arguments; a bad one ends the run with a one-line message."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = Parser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--specmux", type=Path, default=ROOT / "bin" / "specmux-release")
     ap.add_argument("--scene", action="append", choices=sorted(SCENES))
     ap.add_argument("--repeats", type=int, default=10)
@@ -325,7 +341,10 @@ def main():
     print(f"numpy {np.__version__}, scipy {scipy.__version__}, Python {sys.version.split()[0]}, "
           f"{os.cpu_count()} CPUs, {threads}; numpy's FFT is single-threaded, the matrix "
           f"product uses OpenBLAS threads")
-    rig = build_rig(args)
+    try:
+        rig = build_rig(args)
+    except KeyError as e:
+        sys.exit(f"numpy_pipeline: the design file has no key {e} (scenes/prototype.toml has all)")
     for scene in args.scene:
         compare(scene, args, rig)
 
