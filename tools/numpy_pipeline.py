@@ -4,7 +4,7 @@ demultiplexing + per-pixel unmixing) at 768², run beside specmux on the same fr
 Run (from the repository root; the binary is a release build of specmux, any path):
 
     python3 -m venv /tmp/np-venv && /tmp/np-venv/bin/pip install numpy scipy
-    OPENBLAS_NUM_THREADS=2 /tmp/np-venv/bin/python tools/numpy_pipeline.py \
+    OPENBLAS_NUM_THREADS=1 /tmp/np-venv/bin/python tools/numpy_pipeline.py \
         --specmux bin/specmux-release [--scene dead-leaves|shaded-objects]... \
         [--repeats 10] [--nnls-pixels 0] [--work /tmp/numpy-pipeline]
 
@@ -13,8 +13,9 @@ and its cube (`simulate --npy`, then `demo --npy` with `[reconstruct.gap] method
 and builds everything else from what the rig knows: the default carriers (ideal gain ½, phase
 0), crop 0.25 with the square window, η, J and the curve names of scenes/prototype.toml, the
 curves of spectra/. It prints the agreement with specmux, PSNR against the truth, and the
-median times of ≥ `--repeats` runs with the load average. docs/speed.md has the figures.
-Not part of CI.
+median times of `--repeats` (≥ 10) runs with the load average. `--nnls-pixels 0` solves the
+exact fit on every constrained pixel (about a minute for dead-leaves), N on a random sample.
+docs/speed.md has the figures. Not part of CI.
 """
 
 import argparse
@@ -308,14 +309,18 @@ class Parser(argparse.ArgumentParser):
 def parse_args():
     """Arguments; a bad one ends the run with a one-line message."""
     ap = Parser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--specmux", type=Path, default=ROOT / "bin" / "specmux-release")
-    ap.add_argument("--scene", action="append", choices=sorted(SCENES))
-    ap.add_argument("--repeats", type=int, default=10)
-    ap.add_argument("--specmux-repeats", type=int, default=5)
-    ap.add_argument("--nnls-pixels", type=int, default=0)
-    ap.add_argument("--work", type=Path, default=Path("/tmp/numpy-pipeline"))
-    ap.add_argument("--spectra", type=Path, default=ROOT / "spectra")
-    ap.add_argument("--design", type=Path, default=ROOT / "scenes" / "prototype.toml")
+    ap.add_argument("--specmux", type=Path, default=ROOT / "bin" / "specmux-release",
+                    help="a release build of specmux")
+    ap.add_argument("--scene", action="append", choices=sorted(SCENES), help="default: both")
+    ap.add_argument("--repeats", type=int, default=10, help="numpy timing repeats, ≥ 10")
+    ap.add_argument("--specmux-repeats", type=int, default=5, help="specmux demo processes")
+    ap.add_argument("--nnls-pixels", type=int, default=0,
+                    help="exact fit on a sample of N constrained pixels; 0: all")
+    ap.add_argument("--work", type=Path, default=Path("/tmp/numpy-pipeline"),
+                    help="where specmux writes its outputs")
+    ap.add_argument("--spectra", type=Path, default=ROOT / "spectra", help="the curves")
+    ap.add_argument("--design", type=Path, default=ROOT / "scenes" / "prototype.toml",
+                    help="crop, η, J and curve names")
     args = ap.parse_args()
     fail = lambda msg: sys.exit(f"numpy_pipeline: {msg}")
     if args.repeats < 10:
