@@ -74,6 +74,9 @@ pub struct JointConfig {
     pub pnp_passes: usize,
     /// Plug-and-play: enforce Bα ≥ 0 (an exact per-pixel projection as a second ADMM copy).
     pub pnp_nonnegative: bool,
+    /// Record the objective before every iteration (`JointStats::objective`); off, only at the
+    /// seed and the end: evaluating it costs a quarter of a TV iteration (docs/joint.md).
+    pub trace_objective: bool,
 }
 
 impl Default for JointConfig {
@@ -90,6 +93,7 @@ impl Default for JointConfig {
             pnp_edge: 1.0,
             pnp_passes: 4,
             pnp_nonnegative: true,
+            trace_objective: false,
         }
     }
 }
@@ -155,8 +159,9 @@ impl JointConfig {
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 pub struct JointStats {
     pub iterations: usize,
-    /// The objective (data + smoothness + TV) at the seed, then after each iteration; for the
-    /// plug-and-play prior data + smoothness at the seed and at the end.
+    /// The objective (data + smoothness + TV) at the seed, then after each iteration with
+    /// `trace_objective`, else after the last only; for the plug-and-play prior data +
+    /// smoothness at the seed and at the end.
     pub objective: Vec<f64>,
     /// λ in the units of the objective.
     pub lambda: f64,
@@ -452,14 +457,21 @@ impl Joint {
     /// proximal step and the extrapolation ᾱ = 2α⁺ − α. Returns the objective at the α the
     /// iteration started from (computed in the dual pass, which reads α's rows anyway).
     pub fn step(&self, st: &mut JointState) -> f64 {
-        let before = self.dual_step(st);
+        let before = self.dual_step(st, true);
         self.primal_step(st);
         before
     }
 
+    /// One iteration without the objective (the same iterate as [`Joint::step`]).
+    fn step_untraced(&self, st: &mut JointState) {
+        self.dual_step(st, false);
+        self.primal_step(st);
+    }
+
     /// q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel (joint over J and both directions);
-    /// r ← min(r + σβBᾱ, 0), skipped where r = 0 and a bound proves βBᾱ ≥ 0.
-    fn dual_step(&self, st: &mut JointState) -> f64 {
+    /// r ← min(r + σβBᾱ, 0), skipped where r = 0 and a bound proves βBᾱ ≥ 0. With `cost`,
+    /// returns the objective at α (before the step), else 0.
+    fn dual_step(&self, st: &mut JointState, cost: bool) -> f64 {
         let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
         let (bar, alpha, sigma, lambda) = (&st.bar, &st.alpha, st.sigma, st.lambda);
         let (a, y, om) = (&self.a, &st.y, &st.omega);
@@ -472,22 +484,23 @@ impl Joint {
             .for_each_init(
                 || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
                 |(gx, gy), (yy, (((qx, qy), (rrow, act)), sum))| {
-                    row_gradients(alpha, w, h, j, yy, gx, gy);
-                    let mut cost = 0.0f64;
-                    for x in 0..w {
-                        let p = yy * w + x;
-                        let s = x * j..(x + 1) * j;
-                        cost += self.pixel_cost(
-                            &alpha[p * j..(p + 1) * j],
-                            &a[p * j..(p + 1) * j],
-                            y[p],
-                            om[p],
-                            &gx[s.clone()],
-                            &gy[s],
-                            lambda,
-                        );
+                    *sum = 0.0;
+                    if cost {
+                        row_gradients(alpha, w, h, j, yy, gx, gy);
+                        for x in 0..w {
+                            let p = yy * w + x;
+                            let s = x * j..(x + 1) * j;
+                            *sum += self.pixel_cost(
+                                &alpha[p * j..(p + 1) * j],
+                                &a[p * j..(p + 1) * j],
+                                y[p],
+                                om[p],
+                                &gx[s.clone()],
+                                &gy[s],
+                                lambda,
+                            );
+                        }
                     }
-                    *sum = cost;
                     row_gradients(bar, w, h, j, yy, gx, gy);
                     for (qv, g) in qx.iter_mut().zip(gx.iter()) {
                         *qv += sigma * g;
@@ -688,12 +701,20 @@ impl Joint {
         Ok((from_pixel_major(&st.alpha, self.w, self.h, self.j), stats))
     }
 
-    /// `iterations` Chambolle–Pock steps: the objective before each and after the last.
+    /// `iterations` Chambolle–Pock steps: the objective before each (traced; else at the start
+    /// only) and after the last.
     fn iterate(&self, st: &mut JointState, iterations: usize) -> Result<Vec<f64>> {
         let mut objective = Vec::with_capacity(iterations + 1);
+        if !self.cfg.trace_objective {
+            objective.push(self.objective(st));
+        }
         for _ in 0..iterations {
             crate::interrupt::check("the joint reconstruction")?;
-            objective.push(self.step(st));
+            if self.cfg.trace_objective {
+                objective.push(self.step(st));
+            } else {
+                self.step_untraced(st);
+            }
         }
         objective.push(self.objective(st));
         Ok(objective)
@@ -811,7 +832,11 @@ impl Joint {
             .iter()
             .fold((0.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)));
         cube.data.par_iter_mut().for_each(|v| *v = v.max(0.0));
-        let violation = if hi > 0.0 && lo < 0.0 { (-lo / hi) as f64 } else { 0.0 };
+        let violation = if hi > 0.0 && lo < 0.0 {
+            (-lo / hi) as f64
+        } else {
+            0.0
+        };
         Ok((cube, violation))
     }
 
@@ -1063,6 +1088,31 @@ mod tests {
     }
 
     #[test]
+    fn an_untraced_run_keeps_the_traced_iterate_and_its_ends() {
+        let t = truth(24, 24);
+        let run = |trace_objective| {
+            let j = solver(
+                24,
+                30.0,
+                JointConfig {
+                    iterations: 15,
+                    trace_objective,
+                    ..JointConfig::default()
+                },
+            );
+            j.run(&frame_of(&j, &t), &flat_seed(&t), None).unwrap()
+        };
+        let ((traced, ts), (untraced, us)) = (run(true), run(false));
+        assert_eq!(
+            traced.data, untraced.data,
+            "the iterate does not depend on the trace"
+        );
+        assert_eq!(ts.objective.len(), 16);
+        assert_eq!(us.objective, [ts.objective[0], ts.objective[15]]);
+        assert_eq!((ts.iterations, us.iterations), (15, 15));
+    }
+
+    #[test]
     fn the_step_bound_holds_against_power_iteration() {
         let j = solver(16, 1.0, JointConfig::default());
         let est = j.power_iteration(200);
@@ -1152,9 +1202,9 @@ mod tests {
             .sum::<f64>()
             .sqrt();
         eprintln!(
-            "relative error {:.3e}, objective {:?}",
+            "relative error {:.3e}, objective at the seed and the end {:?}",
             err / norm,
-            &stats.objective[stats.objective.len() - 3..]
+            stats.objective
         );
         assert!(err / norm < 1e-4, "relative error {:.3e}", err / norm);
         assert!(stats.objective.iter().all(|v| v.is_finite()));

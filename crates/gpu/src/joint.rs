@@ -52,6 +52,8 @@ pub struct JointGpuState {
 /// The joint solver of one rig on the GPU, bound to the frame and the cube buffers.
 pub struct GpuJoint {
     pub iterations: usize,
+    /// The objective after every step (`trace_objective`), else at the seed and the end only.
+    trace: bool,
     j: usize,
     nbp: usize,
     npx: usize,
@@ -136,6 +138,7 @@ impl GpuJoint {
         let ones = vec![1.0; t.system.nrows()];
         let joint = GpuJoint {
             iterations: t.config.iterations,
+            trace: t.config.trace_objective,
             j,
             nbp: t.padded_bands,
             npx,
@@ -220,7 +223,8 @@ impl GpuJoint {
         self.encode_finish(enc);
     }
 
-    /// Record the start of a run: the lists cleared, λ, τ, σ, M, the tables, ᾱ = α, q = r = 0.
+    /// Record the start of a run: the lists cleared, λ, τ, σ, M, the tables, ᾱ = α, q = r = 0;
+    /// untraced, also the objective at the seed (traced, the first dual step appends it).
     pub fn encode_start(&self, enc: &mut wgpu::CommandEncoder) {
         for b in [
             &self.b.scalars,
@@ -232,6 +236,10 @@ impl GpuJoint {
         }
         let mut cp = enc.begin_compute_pass(&Default::default());
         self.start.iter().for_each(|l| l.record(&mut cp));
+        if !self.trace {
+            self.cost.record(&mut cp);
+            self.cost_sum.iter().for_each(|l| l.record(&mut cp));
+        }
     }
 
     /// Record `steps` iterations (at most `iterations` in all per start: the objective list
@@ -244,7 +252,8 @@ impl GpuJoint {
         }
     }
 
-    /// Record the dual step alone, with the objective at the current α appended to the list.
+    /// Record the dual step alone, with the objective at the current α appended to the list
+    /// when traced.
     pub fn encode_dual(&self, enc: &mut wgpu::CommandEncoder) {
         self.record_dual(&mut enc.begin_compute_pass(&Default::default()));
     }
@@ -257,7 +266,9 @@ impl GpuJoint {
 
     fn record_dual(&self, cp: &mut wgpu::ComputePass) {
         self.dual.record(cp);
-        self.cost_sum.iter().for_each(|l| l.record(cp));
+        if self.trace {
+            self.cost_sum.iter().for_each(|l| l.record(cp));
+        }
     }
 
     /// Record the end of a run: the final objective, the non-finite check, the cube (clipped,
@@ -281,7 +292,7 @@ impl GpuJoint {
     }
 
     /// After the submission that held `encode` (or `encode_finish`): the objective at the seed
-    /// and after each step, λ, τ, σ and the cube's violation, or an error when α holds a NaN
+    /// and after each step (untraced: after the last only), λ, τ, σ and the cube's violation, or an error when α holds a NaN
     /// or an infinite value, as on the CPU. `seconds` is 0: the run is part of one submission.
     pub fn stats(&self, ctx: &GpuContext) -> Result<JointStats> {
         let mut w = vec![0u32; (self.staging.size() / 4) as usize];
@@ -298,7 +309,10 @@ impl GpuJoint {
         let (hi, neg) = (f(w.len() - 3), f(w.len() - 2));
         let n = (w[0] as usize).min(tail - 1);
         Ok(JointStats {
-            iterations: n.saturating_sub(1),
+            iterations: match self.trace {
+                true => n.saturating_sub(1),
+                false => self.iterations,
+            },
             objective: (1..=n).map(f).collect(),
             lambda: f(tail + 3),
             steps: [f(tail + 4), f(tail + 5)],

@@ -2,7 +2,8 @@
 //! the start (λ, τ, σ), the dual step alone (q, r, the active flags and the objective at the
 //! seed), the primal step after it (α, ᾱ), 30 iterations with per-pixel weights ω (α, the
 //! objective after every step, the cube diag(g)·Bα clipped at zero and its violation, the
-//! channels Fα), and the non-finite check. The problem: 24 × 20 pixels (not square, so a
+//! channels Fα), a run without the objective's trace (its two values), and the non-finite
+//! check. The problem: 24 × 20 pixels (not square, so a
 //! swapped axis shows), six sinusoidal patterns, J = 4 cosines over 13 bands (padded to 16:
 //! the padding's lanes are exercised), a seed with noise that leaves a third of the pixels
 //! infeasible so the constraint's dual is active.
@@ -76,20 +77,25 @@ fn basis_and_system() -> (DMatrix<f64>, DMatrix<f64>) {
     (b.clone(), t * b)
 }
 
-fn solver(iterations: usize) -> Joint {
-    solver_with(iterations, 1.0)
-}
-
-/// The solver with smoothness weight η.
-fn solver_with(iterations: usize, eta: f64) -> Joint {
-    let (b, f) = basis_and_system();
-    let cfg = JointConfig {
+/// The tests' settings, the objective traced after every iteration.
+fn config(iterations: usize) -> JointConfig {
+    JointConfig {
         iterations,
         tv_weight: 0.05,
         step_ratio: 1.0,
+        trace_objective: true,
         ..JointConfig::default()
-    };
-    Joint::new(&patterns(), &f, &b, eta, &cfg, "t.toml").unwrap()
+    }
+}
+
+fn solver(iterations: usize) -> Joint {
+    solver_with(&config(iterations), 1.0)
+}
+
+/// The solver with these settings and smoothness weight η.
+fn solver_with(cfg: &JointConfig, eta: f64) -> Joint {
+    let (b, f) = basis_and_system();
+    Joint::new(&patterns(), &f, &b, eta, cfg, "t.toml").unwrap()
 }
 
 /// y = aᵀα per pixel for α planes.
@@ -294,6 +300,28 @@ fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
 }
 
 #[test]
+fn an_untraced_run_keeps_the_objective_at_the_seed_and_the_end() {
+    let Some(ctx) = common::context() else { return };
+    let untraced = JointConfig {
+        trace_objective: false,
+        ..config(12)
+    };
+    let joint = solver_with(&untraced, 1.0);
+    let (frame, seed) = problem(&joint);
+    let (_, cpu) = joint.run(&frame, &seed, None).unwrap();
+    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
+    submit(&ctx, |enc| g.encode(enc));
+    let stats = g.stats(&ctx).unwrap();
+    assert_eq!((stats.iterations, cpu.iterations), (12, 12));
+    assert_eq!((stats.objective.len(), cpu.objective.len()), (2, 2));
+    for (got, want) in stats.objective.iter().zip(&cpu.objective) {
+        let e = ((got - want) / want).abs();
+        eprintln!("objective: GPU {got:.6e}, CPU {want:.6e}, relative {e:.1e}");
+        assert!(e < 1e-4, "{got} against {want}");
+    }
+}
+
+#[test]
 fn bad_weights_are_refused_and_a_non_finite_seed_is_an_error() {
     let Some(ctx) = common::context() else { return };
     let joint = solver(3);
@@ -315,7 +343,7 @@ fn bad_weights_are_refused_and_a_non_finite_seed_is_an_error() {
 #[test]
 fn an_exact_constant_fit_is_a_fixed_point_with_zero_objective() {
     let Some(ctx) = common::context() else { return };
-    let joint = solver_with(20, 0.0);
+    let joint = solver_with(&config(20), 0.0);
     let mut alpha = Cube::zeros(W, H, J);
     for (plane, v) in alpha.planes_mut().zip([2.0f32, 0.2, -0.1, 0.05]) {
         plane.fill(v);
