@@ -53,8 +53,10 @@ pub struct Unmixer {
     /// B by columns: `bt[j][k]` = basis vector j at band k (the spectrum Bα as a sum of
     /// scaled columns, which vectorises over the bands).
     bt: Vec<[f64; MAX_BANDS]>,
-    /// 1/‖b_k‖ for each row of B (normalises the violation of band k; 0 for a zero row,
-    /// which no α can violate).
+    /// 1/‖b_k‖_{H⁻¹} = 1/‖L⁻¹b_kᵀ‖ for each row of B (0 for a zero row, which no α can
+    /// violate): a band's violation times it is its distance from the constraint in the metric
+    /// of H, so the dual method adds the band whose first step raises the objective most (13 %
+    /// fewer steps on dead-leaves than with 1/‖b_k‖; docs/speed.md).
     b_inv_norm: Vec<f64>,
     /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the dual active set's starting factor.
     linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
@@ -70,7 +72,7 @@ pub struct UnmixTables<'a> {
     pub projection: &'a [f32],
     /// B by columns, each zero-padded to `MAX_BANDS`.
     pub basis_columns: &'a [[f64; MAX_BANDS]],
-    /// 1/‖b_k‖ for each band (0 for a zero row).
+    /// 1/‖b_k‖_{H⁻¹} for each band (0 for a zero row).
     pub band_inv_norm: &'a [f64],
     /// Per-band output gains.
     pub gains: &'a [f64],
@@ -198,8 +200,9 @@ impl Unmixer {
             b_inv_norm: b
                 .row_iter()
                 .map(|row| {
-                    if row.norm() > 0.0 {
-                        1.0 / row.norm()
+                    let w = linv.rows(0, n) * row.transpose();
+                    if w.norm() > 0.0 {
+                        1.0 / w.norm()
                     } else {
                         0.0
                     }

@@ -161,7 +161,7 @@ fn source(unmixer: &Unmixer) -> String {
     src
 }
 
-/// The tables of shaders/unmix.wgsl in one f32 buffer — P, M, B (row-major), 1/‖b_k‖,
+/// The tables of shaders/unmix.wgsl in one f32 buffer — P, M, B (row-major), 1/‖b_k‖_{H⁻¹},
 /// gains, L⁻ᵀ — and the parameters that locate them.
 fn pack(unmixer: &Unmixer, npx: usize) -> (Vec<f32>, Params) {
     let t = unmixer.tables();

@@ -122,7 +122,7 @@ impl Unmixer {
         let mut in_w = [false; MAX_BANDS];
         let mut iterations = 0;
         loop {
-            // Step 1: the most violated band (values normalised by ‖b_k‖), or optimal.
+            // Step 1: the most violated band (values normalised by ‖b_k‖_{H⁻¹}), or optimal.
             let mut p = None;
             let mut worst = -tol;
             for k in 0..m {

@@ -8,7 +8,7 @@
 
 struct Params {
     npx: u32,
-    // Offsets into `tables` of M (J × channels), B (bands × J row-major), 1/‖b_k‖ (bands),
+    // Offsets into `tables` of M (J × channels), B (bands × J row-major), 1/‖b_k‖_{H⁻¹} (bands),
     // gains (bands), L⁻ᵀ (8 × 8 column-major); P (bands × channels) is at 0.
     off_unc: u32,
     off_basis: u32,
@@ -133,7 +133,7 @@ fn drop_band(l: u32) {
     q -= 1u;
 }
 
-// The most violated band (values normalised by ‖b_k‖) outside the working set, or MAXM.
+// The most violated band (values normalised by ‖b_k‖_{H⁻¹}) outside the working set, or MAXM.
 fn most_violated(tol: f32) -> u32 {
     var p = MAXM;
     var worst = -tol;
