@@ -502,43 +502,9 @@ impl Joint {
                         }
                     }
                     row_gradients(bar, w, h, j, yy, gx, gy);
-                    for (qv, g) in qx.iter_mut().zip(gx.iter()) {
-                        *qv += sigma * g;
-                    }
-                    for (qv, g) in qy.iter_mut().zip(gy.iter()) {
-                        *qv += sigma * g;
-                    }
-                    for x in 0..w {
-                        let s = x * j..(x + 1) * j;
-                        let n2: f32 = qx[s.clone()]
-                            .iter()
-                            .chain(&qy[s.clone()])
-                            .map(|v| v * v)
-                            .sum();
-                        if n2 > lambda * lambda {
-                            let f = if lambda > 0.0 {
-                                lambda / n2.sqrt()
-                            } else {
-                                0.0
-                            };
-                            qx[s.clone()]
-                                .iter_mut()
-                                .chain(qy[s].iter_mut())
-                                .for_each(|v| *v *= f);
-                        }
-                        let p = yy * w + x;
-                        let bp = &bar[p * j..(p + 1) * j];
-                        if act[x] == 0 && self.surely_feasible(bp) {
-                            continue;
-                        }
-                        let mut u = [0.0f32; MAX_BANDS];
-                        self.basis_times(bp, &mut u[..nb]);
-                        let rp = &mut rrow[x * nb..(x + 1) * nb];
-                        for (rk, uk) in rp.iter_mut().zip(&u[..nb]) {
-                            *rk = (*rk + sigma * uk).min(0.0);
-                        }
-                        act[x] = rp.iter().any(|&v| v < 0.0) as u8;
-                    }
+                    let bar_row = &bar[yy * w * j..(yy + 1) * w * j];
+                    let row = DualRow { qx, qy, r: rrow, active: act };
+                    with_basis_len!(j, J => self.dual_row::<J>(row, bar_row, gx, gy, sigma, lambda));
                 },
             );
         st.row_sums.iter().sum()
@@ -621,28 +587,102 @@ impl Joint {
                 || vec![0.0f32; w * j],
                 |div, (yy, (arow, brow))| {
                     row_divergence(qx, qy, w, j, yy, div);
-                    let mut v = [0.0f32; MAX_J];
-                    let mut mv = [0.0f32; MAX_J];
-                    for x in 0..w {
-                        let p = yy * w + x;
-                        let ap = &mut arow[x * j..(x + 1) * j];
-                        for jj in 0..j {
-                            v[jj] = ap[jj] + tau * div[x * j + jj];
-                        }
-                        if act[p] != 0 {
-                            let rp = &r[p * nb..(p + 1) * nb];
-                            for (jj, vj) in v[..j].iter_mut().enumerate() {
-                                *vj -= tau * self.basis_t_times(jj, rp);
-                            }
-                        }
-                        prox_pixel(mat, &m[p * j..(p + 1) * j], tck[p], &v[..j], &mut mv[..j]);
-                        for jj in 0..j {
-                            brow[x * j + jj] = 2.0 * mv[jj] - ap[jj];
-                            ap[jj] = mv[jj];
-                        }
-                    }
+                    let px = yy * w..(yy + 1) * w;
+                    let row = PrimalRow {
+                        alpha: arow,
+                        bar: brow,
+                        div,
+                        active: &act[px.clone()],
+                        r: &r[px.start * nb..px.end * nb],
+                        m: &m[px.start * j..px.end * j],
+                        tck: &tck[px],
+                    };
+                    with_basis_len!(j, J => self.primal_row::<J>(row, mat, tau));
                 },
             );
+    }
+
+    /// The dual update of one row given ∇ᾱ there (gx, gy): q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel,
+    /// r ← min(r + σβBᾱ, 0) where r ≠ 0 or Bᾱ may be negative. J is the basis length, fixed
+    /// per compiled copy so the per-pixel loops unroll.
+    #[inline(always)]
+    fn dual_row<const J: usize>(
+        &self,
+        row: DualRow<'_>,
+        bar: &[f32],
+        gx: &[f32],
+        gy: &[f32],
+        sigma: f32,
+        lambda: f32,
+    ) {
+        let nb = self.nbp;
+        for (qv, g) in row.qx.iter_mut().zip(gx) {
+            *qv += sigma * g;
+        }
+        for (qv, g) in row.qy.iter_mut().zip(gy) {
+            *qv += sigma * g;
+        }
+        let pixels = row.qx.chunks_exact_mut(J).zip(row.qy.chunks_exact_mut(J));
+        let rest = bar
+            .chunks_exact(J)
+            .zip(row.r.chunks_exact_mut(nb))
+            .zip(row.active);
+        for ((qx, qy), ((bp, rp), act)) in pixels.zip(rest) {
+            let mut n2 = 0.0f32;
+            for v in qx.iter().chain(qy.iter()) {
+                n2 += v * v;
+            }
+            if n2 > lambda * lambda {
+                let f = if lambda > 0.0 {
+                    lambda / n2.sqrt()
+                } else {
+                    0.0
+                };
+                qx.iter_mut().chain(qy.iter_mut()).for_each(|v| *v *= f);
+            }
+            if *act == 0 && self.surely_feasible(bp) {
+                continue;
+            }
+            let mut u = [0.0f32; MAX_BANDS];
+            self.basis_times(bp, &mut u[..nb]);
+            // Counted, not searched with an early exit: the count vectorises with the update.
+            let mut negative = 0u32;
+            for (rk, uk) in rp.iter_mut().zip(&u[..nb]) {
+                *rk = (*rk + sigma * uk).min(0.0);
+                negative += (*rk < 0.0) as u32;
+            }
+            *act = (negative > 0) as u8;
+        }
+    }
+
+    /// The primal update of one row given div q there: α⁺ = prox_{τf}(α + τ(div q − βBᵀr)),
+    /// ᾱ = 2α⁺ − α, with J fixed per compiled copy as in [`Joint::dual_row`].
+    #[inline(always)]
+    fn primal_row<const J: usize>(&self, row: PrimalRow<'_>, mat: &[f32], tau: f32) {
+        let nb = self.nbp;
+        let pixels = row
+            .alpha
+            .chunks_exact_mut(J)
+            .zip(row.bar.chunks_exact_mut(J));
+        let tables = row.m.chunks_exact(J).zip(row.tck);
+        let duals = row
+            .div
+            .chunks_exact(J)
+            .zip(row.active)
+            .zip(row.r.chunks_exact(nb));
+        for (((ap, bp), (mp, tck)), ((div, &act), rp)) in pixels.zip(tables).zip(duals) {
+            let mut v: [f32; J] = std::array::from_fn(|jj| ap[jj] + tau * div[jj]);
+            if act != 0 {
+                for (jj, vj) in v.iter_mut().enumerate() {
+                    *vj -= tau * self.basis_t_times(jj, rp);
+                }
+            }
+            let mv = prox_pixel::<J>(mat, mp, *tck, &v);
+            for jj in 0..J {
+                bp[jj] = 2.0 * mv[jj] - ap[jj];
+                ap[jj] = mv[jj];
+            }
+        }
     }
 
     /// ½Σω(y − aᵀα)² + ½Σ αᵀη'Qα + λΣ‖∇α‖ at the current α (row sums in f64, fixed order).
@@ -914,6 +954,69 @@ const MAX_BANDS: usize = crate::unmix::MAX_BANDS;
 /// f32 lanes the band loops are padded to (one AVX register).
 const LANES: usize = 8;
 
+/// `$body` with the constant `$J` equal to the basis length `$j` (1..=MAX_J, checked by
+/// [`Joint::new`]): the per-pixel kernels are compiled once per J.
+macro_rules! with_basis_len {
+    ($j:expr, $J:ident => $body:expr) => {
+        match $j {
+            1 => {
+                const $J: usize = 1;
+                $body
+            }
+            2 => {
+                const $J: usize = 2;
+                $body
+            }
+            3 => {
+                const $J: usize = 3;
+                $body
+            }
+            4 => {
+                const $J: usize = 4;
+                $body
+            }
+            5 => {
+                const $J: usize = 5;
+                $body
+            }
+            6 => {
+                const $J: usize = 6;
+                $body
+            }
+            7 => {
+                const $J: usize = 7;
+                $body
+            }
+            _ => {
+                const $J: usize = MAX_J;
+                $body
+            }
+        }
+    };
+}
+use with_basis_len;
+
+/// One row's dual variables: q (both directions, J per pixel), r (padded bands per pixel) and
+/// the flags of pixels whose r is non-zero.
+struct DualRow<'a> {
+    qx: &'a mut [f32],
+    qy: &'a mut [f32],
+    r: &'a mut [f32],
+    active: &'a mut [u8],
+}
+
+/// One row of the primal update: α and ᾱ (written), div q, and the row's share of the dual
+/// flags, r and the proximal tables.
+struct PrimalRow<'a> {
+    alpha: &'a mut [f32],
+    bar: &'a mut [f32],
+    div: &'a [f32],
+    active: &'a [u8],
+    r: &'a [f32],
+    m: &'a [f32],
+    tck: &'a [[f32; 3]],
+}
+
 /// out = M v for a J × J matrix stored column-major (nalgebra's order; M is symmetric anyway).
 #[inline]
 fn mat_vec(mat: &[f32], v: &[f32], out: &mut [f32]) {
@@ -923,16 +1026,24 @@ fn mat_vec(mat: &[f32], v: &[f32], out: &mut [f32]) {
     }
 }
 
-/// out = prox_{τf}(v) of one pixel, f = ½ω(y − aᵀα)² + ½αᵀη'Qα: (I + τH)⁻¹(v + τωya) by
-/// Sherman–Morrison on M = (I + τη'Q)⁻¹ with its tables m = Ma and (t, c, k) (`prox_tables`).
-#[inline]
-fn prox_pixel(mat: &[f32], mp: &[f32], [t, c, k]: [f32; 3], v: &[f32], out: &mut [f32]) {
-    mat_vec(mat, v, out);
+/// prox_{τf}(v) of one pixel, f = ½ω(y − aᵀα)² + ½αᵀη'Qα: (I + τH)⁻¹(v + τωya) by
+/// Sherman–Morrison on M = (I + τη'Q)⁻¹ (J × J, column-major) with its tables m = Ma and
+/// (t, c, k) (`prox_tables`); J fixed per compiled copy.
+#[inline(always)]
+fn prox_pixel<const J: usize>(
+    mat: &[f32],
+    mp: &[f32],
+    [t, c, k]: [f32; 3],
+    v: &[f32; J],
+) -> [f32; J] {
+    let mut out: [f32; J] =
+        std::array::from_fn(|r| (0..J).map(|col| mat[col * J + r] * v[col]).sum());
     let mtv: f32 = mp.iter().zip(v).map(|(a, b)| a * b).sum();
     let coef = t - c * (mtv + t * k);
     for (o, m) in out.iter_mut().zip(mp) {
         *o += coef * m;
     }
+    out
 }
 
 /// Forward differences of row `yy` of a pixel-major field (J per pixel), zero across the last
@@ -967,10 +1078,19 @@ fn row_gradients(
 fn row_divergence(qx: &[f32], qy: &[f32], w: usize, j: usize, yy: usize, div: &mut [f32]) {
     let start = yy * w * j;
     let (qxr, qyr) = (&qx[start..start + w * j], &qy[start..start + w * j]);
-    for (i, d) in div.iter_mut().enumerate() {
-        let left = if i >= j { qxr[i - j] } else { 0.0 };
-        let up = if yy > 0 { qy[start - w * j + i] } else { 0.0 };
-        *d = qxr[i] - left + qyr[i] - up;
+    // The first pixel has no left neighbour and the first row none above: 0 there.
+    div[..j].copy_from_slice(&qxr[..j]);
+    for ((d, q), left) in div[j..].iter_mut().zip(&qxr[j..]).zip(qxr) {
+        *d = q - left;
+    }
+    match yy {
+        0 => div.iter_mut().zip(qyr).for_each(|(d, q)| *d += q),
+        _ => {
+            let up = &qy[start - w * j..start];
+            for ((d, q), u) in div.iter_mut().zip(qyr).zip(up) {
+                *d = *d + q - u;
+            }
+        }
     }
 }
 

@@ -12,7 +12,7 @@
 //! second copy z₂ = P_C(x + u₂) (consensus ADMM: x against (z, z₂), still two blocks, so the
 //! same argument holds); the output is then z₂, feasible.
 
-use super::{from_pixel_major, prox_pixel, Joint, JointStats, MAX_J};
+use super::{from_pixel_major, prox_pixel, with_basis_len, Joint, JointStats, MAX_J};
 use crate::denoise::GraphSmoother;
 use crate::error::{Error, Result};
 use crate::unmix::Unmixer;
@@ -107,7 +107,10 @@ pub fn run(
                         *vk = 0.5 * (*vk + z2[p * j + k] - u2[p * j + k]);
                     }
                 }
-                prox_pixel(&mat, mp, t, &v[..j], xp);
+                with_basis_len!(j, J => {
+                    let v: [f32; J] = std::array::from_fn(|k| v[k]);
+                    xp.copy_from_slice(&prox_pixel::<J>(&mat, mp, t, &v));
+                });
             });
         // s.scratch = x + u: the smoother's input and, before the freeze, its guide.
         s.scratch
