@@ -474,7 +474,7 @@ impl Joint {
     fn dual_step(&self, st: &mut JointState, cost: bool) -> f64 {
         let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
         let (bar, alpha, sigma, lambda) = (&st.bar, &st.alpha, st.sigma, st.lambda);
-        let (a, y, om) = (&self.a, &st.y, &st.omega);
+        let (y, om) = (&st.y, &st.omega);
         st.qx
             .par_chunks_mut(w * j)
             .zip(st.qy.par_chunks_mut(w * j))
@@ -484,23 +484,10 @@ impl Joint {
             .for_each_init(
                 || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
                 |(gx, gy), (yy, (((qx, qy), (rrow, act)), sum))| {
-                    *sum = 0.0;
-                    if cost {
-                        row_gradients(alpha, w, h, j, yy, gx, gy);
-                        for x in 0..w {
-                            let p = yy * w + x;
-                            let s = x * j..(x + 1) * j;
-                            *sum += self.pixel_cost(
-                                &alpha[p * j..(p + 1) * j],
-                                &a[p * j..(p + 1) * j],
-                                y[p],
-                                om[p],
-                                &gx[s.clone()],
-                                &gy[s],
-                                lambda,
-                            );
-                        }
-                    }
+                    *sum = match cost {
+                        true => self.row_cost(alpha, y, om, lambda, yy, (gx, gy)),
+                        false => 0.0,
+                    };
                     row_gradients(bar, w, h, j, yy, gx, gy);
                     let bar_row = &bar[yy * w * j..(yy + 1) * w * j];
                     let row = DualRow { qx, qy, r: rrow, active: act };
@@ -545,33 +532,56 @@ impl Joint {
         lower >= 0.0
     }
 
-    /// One pixel's share of the objective: ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖.
-    #[allow(clippy::too_many_arguments)]
-    #[inline]
-    fn pixel_cost(
+    /// Row `yy`'s share of the objective Σ ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖, in f64 in pixel
+    /// order; `grad` is scratch for the row's ∇α.
+    fn row_cost(
         &self,
         alpha: &[f32],
-        a: &[f32],
-        y: f32,
-        om: f32,
-        gx: &[f32],
-        gy: &[f32],
+        y: &[f32],
+        om: &[f32],
         lambda: f32,
+        yy: usize,
+        (gx, gy): (&mut [f32], &mut [f32]),
     ) -> f64 {
-        let j = self.j;
-        let fit: f64 = a
-            .iter()
-            .zip(alpha)
-            .map(|(u, v)| *u as f64 * *v as f64)
-            .sum();
-        let mut quad = 0.0;
-        for r in 0..j {
-            for c in 0..j {
-                quad += alpha[r] as f64 * self.eq[(r, c)] * alpha[c] as f64;
+        let (w, h, j) = (self.w, self.h, self.j);
+        row_gradients(alpha, w, h, j, yy, gx, gy);
+        let px = yy * w..(yy + 1) * w;
+        let row = CostRow {
+            alpha: &alpha[px.start * j..px.end * j],
+            a: &self.a[px.start * j..px.end * j],
+            y: &y[px.clone()],
+            om: &om[px],
+            gx,
+            gy,
+        };
+        with_basis_len!(j, J => self.row_cost_j::<J>(row, lambda))
+    }
+
+    /// [`Joint::row_cost`] with J fixed per compiled copy.
+    #[inline(always)]
+    fn row_cost_j<const J: usize>(&self, row: CostRow<'_>, lambda: f32) -> f64 {
+        let eq: [[f64; J]; J] = std::array::from_fn(|r| std::array::from_fn(|c| self.eq[(r, c)]));
+        let pixels = row.alpha.chunks_exact(J).zip(row.a.chunks_exact(J));
+        let grads = row.gx.chunks_exact(J).zip(row.gy.chunks_exact(J));
+        let data = row.y.iter().zip(row.om);
+        let mut sum = 0.0;
+        for (((alpha, a), (gx, gy)), (&y, &om)) in pixels.zip(grads).zip(data) {
+            let fit: f64 = a
+                .iter()
+                .zip(alpha)
+                .map(|(u, v)| *u as f64 * *v as f64)
+                .sum();
+            let mut quad = 0.0;
+            for (r, er) in eq.iter().enumerate() {
+                for (c, e) in er.iter().enumerate() {
+                    quad += alpha[r] as f64 * e * alpha[c] as f64;
+                }
             }
+            let g2: f64 = gx.iter().chain(gy).map(|&g| (g as f64).powi(2)).sum();
+            sum +=
+                0.5 * om as f64 * (y as f64 - fit).powi(2) + 0.5 * quad + lambda as f64 * g2.sqrt();
         }
-        let g2: f64 = gx.iter().chain(gy).map(|&g| (g as f64).powi(2)).sum();
-        0.5 * om as f64 * (y as f64 - fit).powi(2) + 0.5 * quad + lambda as f64 * g2.sqrt()
+        sum
     }
 
     /// α⁺ = prox_{τf}(α − τ(∇ᵀq + βBᵀr)); ᾱ = 2α⁺ − α.
@@ -687,28 +697,11 @@ impl Joint {
 
     /// ½Σω(y − aᵀα)² + ½Σ αᵀη'Qα + λΣ‖∇α‖ at the current α (row sums in f64, fixed order).
     pub fn objective(&self, st: &mut JointState) -> f64 {
-        let (w, h, j) = (self.w, self.h, self.j);
-        let (alpha, a, y, om, lambda) = (&st.alpha, &self.a, &st.y, &st.omega, st.lambda);
+        let (w, j) = (self.w, self.j);
+        let (alpha, y, om, lambda) = (&st.alpha, &st.y, &st.omega, st.lambda);
         st.row_sums.par_iter_mut().enumerate().for_each_init(
             || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
-            |(gx, gy), (yy, sum)| {
-                row_gradients(alpha, w, h, j, yy, gx, gy);
-                *sum = (0..w)
-                    .map(|x| {
-                        let p = yy * w + x;
-                        let s = x * j..(x + 1) * j;
-                        self.pixel_cost(
-                            &alpha[p * j..(p + 1) * j],
-                            &a[p * j..(p + 1) * j],
-                            y[p],
-                            om[p],
-                            &gx[s.clone()],
-                            &gy[s],
-                            lambda,
-                        )
-                    })
-                    .sum();
-            },
+            |(gx, gy), (yy, sum)| *sum = self.row_cost(alpha, y, om, lambda, yy, (gx, gy)),
         );
         st.row_sums.iter().sum()
     }
@@ -869,8 +862,12 @@ impl Joint {
         let mut cube = alpha.mix(&b)?;
         let (lo, hi) = cube
             .data
-            .iter()
-            .fold((0.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+            .par_chunks(1 << 16)
+            .map(|c| {
+                c.iter()
+                    .fold((0.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+            })
+            .reduce(|| (0.0, 0.0), |(a, b), (c, d)| (a.min(c), b.max(d)));
         cube.data.par_iter_mut().for_each(|v| *v = v.max(0.0));
         let violation = if hi > 0.0 && lo < 0.0 {
             (-lo / hi) as f64
@@ -1005,6 +1002,16 @@ struct DualRow<'a> {
     active: &'a mut [u8],
 }
 
+/// One row's data for its share of the objective: α, a, y, ω and the row's ∇α.
+struct CostRow<'a> {
+    alpha: &'a [f32],
+    a: &'a [f32],
+    y: &'a [f32],
+    om: &'a [f32],
+    gx: &'a [f32],
+    gy: &'a [f32],
+}
+
 /// One row of the primal update: α and ᾱ (written), div q, and the row's share of the dual
 /// flags, r and the proximal tables.
 struct PrimalRow<'a> {
@@ -1113,13 +1120,28 @@ fn to_pixel_major(c: &Cube) -> Vec<f32> {
 
 /// Pixel-major → planes.
 fn from_pixel_major(v: &[f32], w: usize, h: usize, j: usize) -> Cube {
+    // In blocks of pixels, each block's J planes filled from its part of v (which stays in
+    // cache), rather than one strided pass over all of v per plane.
+    const BLOCK: usize = 4096;
     let n = w * h;
     let mut c = Cube::zeros(w, h, j);
-    c.data.par_chunks_mut(n).enumerate().for_each(|(k, plane)| {
-        for (p, o) in plane.iter_mut().enumerate() {
-            *o = v[p * j + k];
+    let mut blocks: Vec<Vec<&mut [f32]>> = (0..n.div_ceil(BLOCK)).map(|_| Vec::new()).collect();
+    for plane in c.data.chunks_exact_mut(n.max(1)) {
+        for (b, part) in plane.chunks_mut(BLOCK).enumerate() {
+            blocks[b].push(part);
         }
-    });
+    }
+    blocks
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(b, mut planes)| {
+            let src = &v[b * BLOCK * j..];
+            for (k, plane) in planes.iter_mut().enumerate() {
+                for (o, px) in plane.iter_mut().zip(src.chunks_exact(j)) {
+                    *o = px[k];
+                }
+            }
+        });
     c
 }
 
