@@ -111,8 +111,8 @@ impl Setting {
 
 /// The default grid: Fourier at three crops × three window shapes, GAP and GAP-TV at
 /// 1, 2, 5, 10, 20, 50 iterations (crop 0.25, square), both at 20 iterations with the other
-/// two windows, and the joint reconstruction with its TV and its plug-and-play prior at 10, 20,
-/// 40, 80 iterations.
+/// two windows, and the joint reconstruction with its TV prior at 10, 15, 20, 30, 40, 80
+/// iterations and its plug-and-play prior at 10, 20, 40, 80.
 pub fn default_grid() -> Vec<Setting> {
     let shapes = [
         WindowShape::Square,
@@ -154,8 +154,12 @@ pub fn default_grid() -> Vec<Setting> {
             });
         }
     }
-    for prior in [Prior::Tv, Prior::Pnp] {
-        for iterations in [10, 20, 40, 80] {
+    // TV is what `auto` picks near the default budget: 15 and 30 iterations refine it there.
+    for (prior, counts) in [
+        (Prior::Tv, &[10, 15, 20, 30, 40, 80][..]),
+        (Prior::Pnp, &[10, 20, 40, 80]),
+    ] {
+        for &iterations in counts {
             g.push(joint_setting(iterations, prior, NoiseAware::Off));
         }
     }
