@@ -533,7 +533,7 @@ impl Joint {
     }
 
     /// Row `yy`'s share of the objective Σ ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖, in f64 in pixel
-    /// order; `grad` is scratch for the row's ∇α.
+    /// order; (gx, gy) is scratch for the row's ∇α.
     fn row_cost(
         &self,
         alpha: &[f32],
