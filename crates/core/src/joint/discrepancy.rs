@@ -47,8 +47,8 @@ pub fn choose(j: &Joint, st: &mut JointState) -> Result<Search> {
 }
 
 /// The root of ln ρ(λ) = 0 for an increasing ρ, from λ₀ > 0: secant steps in (ln λ, ln ρ),
-/// at most ×100 per step until both sides are bracketed, then kept inside the bracket (10 %
-/// from its ends, so a one-sided secant cannot stall).
+/// at most ×100 per step until both sides are bracketed, then the Illinois variant of regula
+/// falsi kept inside the bracket (10 % from its ends), so a one-sided secant cannot stall.
 pub fn secant(lambda0: f64, mut ratio_at: impl FnMut(f64) -> Result<f64>) -> Result<Search> {
     if !(lambda0.is_finite() && lambda0 > 0.0) {
         return Err(Error::Numerical(format!(
@@ -60,6 +60,7 @@ pub fn secant(lambda0: f64, mut ratio_at: impl FnMut(f64) -> Result<f64>) -> Res
     let mut points: Vec<[f64; 2]> = Vec::new();
     let mut trials = Vec::new();
     let mut reached = false;
+    let mut last_low = None;
     let mut l = lambda0.ln();
     for _ in 0..MAX_TRIALS {
         let ratio = ratio_at(l.exp())?;
@@ -76,11 +77,21 @@ pub fn secant(lambda0: f64, mut ratio_at: impl FnMut(f64) -> Result<f64>) -> Res
             break;
         }
         let p = [l, r];
-        if r < 0.0 {
+        let low = r < 0.0;
+        if low {
             below = Some(below.map_or(p, |b| if l > b[0] { p } else { b }));
         } else {
             above = Some(above.map_or(p, |a| if l < a[0] { p } else { a }));
         }
+        // Illinois: when the same side moved twice in a row, halve the other end's ln ρ, so
+        // a convex ρ cannot pin the secant to one far end (regula falsi's stall).
+        if last_low == Some(low) {
+            let kept = if low { &mut above } else { &mut below };
+            if let Some(k) = kept {
+                k[1] *= 0.5;
+            }
+        }
+        last_low = Some(low);
         points.push(p);
         let next = match (below, above) {
             (Some(b), Some(a)) => {
@@ -131,6 +142,25 @@ mod tests {
         assert!(s.reached, "{s:?}");
         assert!((s.lambda / 3.0 - 1.0).abs() < 1e-6, "{s:?}");
         assert!(s.trials.len() <= 3, "{s:?}");
+    }
+
+    /// The case CI's proptest found: a convex ρ whose far upper end (ρ = 62 after a ×100
+    /// step) held plain regula falsi on one side until the trials ran out (ρ 0.89, then 1.20).
+    /// With the Illinois halving it is matched on the sixth trial (λ = 353.5, ρ = 1.03, as
+    /// an independent Python model of the search gives).
+    #[test]
+    fn a_convex_ratio_does_not_stall_the_bracket() {
+        let (root, p, q, mix) = (
+            5.851916613915586f64,
+            0.36772996669052627,
+            2.722789256700949,
+            0.5585876726129206,
+        );
+        let f = |l: f64| (1.0 - mix) * (l / root.exp()).powf(p) + mix * (l / root.exp()).powf(q);
+        let s = secant(1.0, |l| Ok(f(l))).unwrap();
+        assert!(s.reached, "{s:?}");
+        assert_eq!(s.trials.len(), 6, "{s:?}");
+        assert!((s.lambda / 353.5 - 1.0).abs() < 1e-3, "{s:?}");
     }
 
     /// A ratio that never reaches 1 stops at the bound and says so.
