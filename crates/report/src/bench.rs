@@ -4,6 +4,8 @@
 
 use crate::plot;
 use crate::plot::Series;
+use plotters::coord::ranged1d::{DefaultFormatting, KeyPointHint};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use serde::Serialize;
 use specmux_core::auto;
@@ -522,8 +524,8 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
     s
 }
 
-/// Final-cube PSNR against median run time, log time axis (ln t drawn linearly and labelled in
-/// seconds, so that the decade below 1 s gets labels too), one colour per method, the Pareto
+/// Final-cube PSNR against median run time, log time axis (ln t drawn linearly, ticked at 1, 2
+/// and 5 × 10ⁿ s, so that every decade gets labels), one colour per method, the Pareto
 /// front as a line through its points, each labelled with its setting, and the setting that
 /// `method = "auto"` picks for this frame size at the default budget ringed.
 pub fn work_precision_plot(
@@ -572,12 +574,11 @@ pub fn work_precision_plot(
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d((t0 / 1.3).ln()..(t1 * 2.5).ln(), (p0 - pad)..(p1 + pad))
+            .build_cartesian_2d(LnTimeAxis::new(t0 / 1.3, t1 * 2.5), (p0 - pad)..(p1 + pad))
             .map_err(|x| e(&x))?;
         chart
             .configure_mesh()
-            .x_labels(12)
-            .x_label_formatter(&|v| format!("{:.3}", v.exp()))
+            .x_label_formatter(&|v| seconds_label(v.exp()))
             .x_desc("median wall time of demultiplex + de-alias/joint + unmix, s (log)")
             .y_desc("final cube PSNR, dB")
             .draw()
@@ -682,6 +683,54 @@ pub fn work_precision_plot(
             .draw()
             .map_err(|x| e(&x))
     })
+}
+
+/// The plot's time axis: ln t drawn linearly, ticked at [`time_ticks`] (plotters' own log
+/// axis labels only the decades when they are few).
+struct LnTimeAxis {
+    ln: RangedCoordf64,
+    ticks: Vec<f64>,
+}
+
+impl LnTimeAxis {
+    /// The axis from `lo` to `hi` seconds.
+    fn new(lo: f64, hi: f64) -> LnTimeAxis {
+        LnTimeAxis {
+            ln: (lo.ln()..hi.ln()).into(),
+            ticks: time_ticks(lo, hi),
+        }
+    }
+}
+
+impl Ranged for LnTimeAxis {
+    type FormatOption = DefaultFormatting;
+    type ValueType = f64;
+    fn map(&self, v: &f64, limit: (i32, i32)) -> i32 {
+        self.ln.map(v, limit)
+    }
+    fn key_points<H: KeyPointHint>(&self, _: H) -> Vec<f64> {
+        self.ticks.clone()
+    }
+    fn range(&self) -> std::ops::Range<f64> {
+        self.ln.range()
+    }
+}
+
+/// ln of the times 1, 2 and 5 × 10ⁿ s within [lo, hi]: the log time axis's ticks.
+fn time_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let first = lo.log10().floor() as i32;
+    let last = hi.log10().ceil() as i32;
+    (first..=last)
+        .flat_map(|n| [1.0, 2.0, 5.0].map(|m| m * 10f64.powi(n)))
+        .filter(|t| (lo..=hi).contains(t))
+        .map(f64::ln)
+        .collect()
+}
+
+/// A tick's time in seconds with as many decimals as its leading digit needs (0.002, 0.5, 20).
+fn seconds_label(t: f64) -> String {
+    let decimals = (-t.log10().floor()).max(0.0) as usize;
+    format!("{t:.decimals$}")
 }
 
 /// Where each Pareto label goes (its top-left corner): right of and just below its point, or
@@ -904,6 +953,24 @@ pub fn sweep_plot(path: &Path, rows: &[CropRow]) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The time axis of a bench from 0.03 s to 40 s is ticked at 0.05, 0.1, 0.2, 0.5, 1, 2, 5,
+    /// 10, 20 s (in ln) and labelled without trailing digits.
+    #[test]
+    fn time_ticks_are_one_two_five_per_decade() {
+        let ticks: Vec<f64> = time_ticks(0.03, 40.0).into_iter().map(f64::exp).collect();
+        let want = [0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0];
+        assert_eq!(ticks.len(), want.len(), "{ticks:?}");
+        for (t, w) in ticks.iter().zip(want) {
+            assert!((t / w - 1.0).abs() < 1e-12, "{ticks:?}");
+        }
+        let labels: Vec<String> = ticks.iter().map(|&t| seconds_label(t)).collect();
+        assert_eq!(
+            labels,
+            ["0.05", "0.1", "0.2", "0.5", "1", "2", "5", "10", "20"]
+        );
+        assert_eq!(seconds_label(0.002), "0.002");
+    }
 
     #[test]
     fn pareto_front_of_a_hand_made_set() {
