@@ -860,15 +860,18 @@ impl Joint {
                 .for_each(|(row, g)| row.iter_mut().for_each(|v| *v *= g));
         }
         let mut cube = alpha.mix(&b)?;
+        // The range and the clip in one pass over the cube.
         let (lo, hi) = cube
             .data
-            .par_chunks(1 << 16)
+            .par_chunks_mut(1 << 16)
             .map(|c| {
-                c.iter()
-                    .fold((0.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+                c.iter_mut().fold((0.0f32, 0.0f32), |(lo, hi), v| {
+                    let range = (lo.min(*v), hi.max(*v));
+                    *v = v.max(0.0);
+                    range
+                })
             })
             .reduce(|| (0.0, 0.0), |(a, b), (c, d)| (a.min(c), b.max(d)));
-        cube.data.par_iter_mut().for_each(|v| *v = v.max(0.0));
         let violation = if hi > 0.0 && lo < 0.0 {
             (-lo / hi) as f64
         } else {

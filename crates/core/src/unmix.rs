@@ -200,9 +200,9 @@ impl Unmixer {
             b_inv_norm: b
                 .row_iter()
                 .map(|row| {
-                    let w = linv.rows(0, n) * row.transpose();
-                    if w.norm() > 0.0 {
-                        1.0 / w.norm()
+                    let norm = (linv.rows(0, n) * row.transpose()).norm();
+                    if norm > 0.0 {
+                        1.0 / norm
                     } else {
                         0.0
                     }
