@@ -567,6 +567,8 @@ pub fn work_precision_plot(
         })
         .collect();
     let auto = auto::pick_from(&entries, auto::default_budget(pixels), pixels);
+    // The time axis, with room for the labels right of the slowest point.
+    let (x0, x1) = (t0 / 1.3, t1 * 2.5);
     plot::render_png(path, (1000, 640), |root| {
         let e = |e: &dyn std::fmt::Display| e.to_string();
         let mut chart = ChartBuilder::on(root)
@@ -574,7 +576,7 @@ pub fn work_precision_plot(
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(LnTimeAxis::new(t0 / 1.3, t1 * 2.5), (p0 - pad)..(p1 + pad))
+            .build_cartesian_2d(LnTimeAxis::new(x0, x1), (p0 - pad)..(p1 + pad))
             .map_err(|x| e(&x))?;
         chart
             .configure_mesh()
@@ -647,7 +649,7 @@ pub fn work_precision_plot(
             .map(|r| r.label.replace(", crop 0.25 square", ""))
             .collect();
         let points: Vec<(f64, f64)> = front.iter().map(|r| (r.seconds.ln(), r.psnr_db)).collect();
-        let spans = ((t1 * 3.25 / t0).ln(), p1 - p0 + 2.0 * pad);
+        let spans = ((x1 / x0).ln(), p1 - p0 + 2.0 * pad);
         let spots = label_spots(&points, &labels, spans, pad);
         chart
             .draw_series(

@@ -681,8 +681,8 @@ pub(crate) mod gpu_tests {
     /// `[compute] device = "gpu"` sums the relay's pairs on the GPU (the stage says so) and
     /// gives the CPU's frame within 1e-5 NRMSE: the pair sums' bound, which the lens and the
     /// resampling (linear, norm ≤ 1 per pattern) do not amplify. DMD 64 × 48, line light: the
-    /// wheel's bands pass 7–19 thousand bins a pattern, whose sums take lavapipe 12 minutes
-    /// (the CPU's half a second); `imaging`'s relay test sums band light on the GPU.
+    /// wheel's bands pass 7–19 thousand bins a pattern, whose sums took lavapipe 12 minutes
+    /// (the CPU a few seconds; docs/gpu.md); `imaging`'s relay test sums band light on the GPU.
     #[test]
     fn the_forward_model_with_gpu_pair_sums_gives_the_cpus_frame() {
         let rig = "[rig.dmd]\nwidth = 64\nheight = 48\n[rig.fourier_filter]\nlight = \"line\"\n\
