@@ -31,7 +31,8 @@ struct Params {
     lambda_per_y: f32,
     ratio: f32,
     step: f32,
-    _pad: f32,
+    /// γ − 1 of the over-relaxation (0: the plain Chambolle–Pock step).
+    over: f32,
 }
 
 /// The iterate and dual variables read back, plane-major (value k of pixel p at k·npx + p).
@@ -54,6 +55,8 @@ pub struct GpuJoint {
     pub iterations: usize,
     /// The objective after every step (`trace_objective`), else at the seed and the end only.
     trace: bool,
+    /// Over-relaxation γ (reported in the stats).
+    relaxation: f64,
     j: usize,
     nbp: usize,
     npx: usize,
@@ -139,6 +142,7 @@ impl GpuJoint {
         let joint = GpuJoint {
             iterations: t.config.iterations,
             trace: t.config.trace_objective,
+            relaxation: t.config.relaxation,
             j,
             nbp: t.padded_bands,
             npx,
@@ -317,6 +321,7 @@ impl GpuJoint {
             lambda: f(tail + 3),
             steps: [f(tail + 4), f(tail + 5)],
             violation: if hi > 0.0 { neg / hi } else { 0.0 },
+            relaxation: Some(self.relaxation),
             ..Default::default()
         })
     }
@@ -393,7 +398,7 @@ fn params(joint: &Joint) -> Params {
         lambda_per_y: (t.config.tv_weight * t.mean_a_norm) as f32,
         ratio: t.config.step_ratio as f32,
         step: (t.step_product.sqrt() / t.operator_norm) as f32,
-        _pad: 0.0,
+        over: (t.config.relaxation - 1.0) as f32,
     }
 }
 

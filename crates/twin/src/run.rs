@@ -476,8 +476,12 @@ impl RunReport {
             s += &format!("auto: {}\n", a.reason);
         }
         if let Some(j) = &self.joint {
+            let relaxed = j
+                .relaxation
+                .map(|g| format!(", relaxation γ = {g}"))
+                .unwrap_or_default();
             s += &format!(
-                "joint: {} iterations, λ = {:.3e}, objective {:.4e} → {:.4e}, constraint violation {:.1e} of the peak (clipped)\n",
+                "joint: {} iterations{relaxed}, λ = {:.3e}, objective {:.4e} → {:.4e}, constraint violation {:.1e} of the peak (clipped)\n",
                 j.iterations,
                 j.lambda,
                 j.objective.first().copied().unwrap_or(f64::NAN),

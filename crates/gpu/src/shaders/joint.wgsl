@@ -10,11 +10,12 @@ struct Params {
     npx: u32,
     // Bands of the cube `clip` reads.
     bands: u32,
-    // λ per unit of mean|y| (tv_weight · mean‖a‖), the τ/σ balance, √(τσ‖K‖²)/‖K‖.
+    // λ per unit of mean|y| (tv_weight · mean‖a‖), the τ/σ balance, √(τσ‖K‖²)/‖K‖, and γ − 1
+    // of the over-relaxation (0: the plain step).
     lambda_per_y: f32,
     ratio: f32,
     step: f32,
-    _pad1: f32,
+    over: f32,
 }
 
 // Basis vectors and bands padded to lanes (specmux-gpu writes the rig's values here).
@@ -214,7 +215,7 @@ fn surely_feasible(bar: array<f32, J>) -> bool {
 
 // ---- dual (per pixel): the pixel's cost at α (for the objective), then
 // q ← P_{‖·‖≤λ}(q + σ∇ᾱ) jointly over J and both directions, and
-// r ← min(r + σβBᾱ, 0), skipped where r = 0 and the bound proves βBᾱ ≥ 0.
+// r ← min(r + σβBᾱ, 0), skipped where r = 0 and the bound proves βBᾱ ≥ 0; both relaxed by γ.
 @compute @workgroup_size(256)
 fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let p = linear(gid, nwg);
@@ -228,11 +229,15 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let sigma = sc[SC_SIGMA];
     var qx: array<f32, J>;
     var qy: array<f32, J>;
+    var qx0: array<f32, J>;
+    var qy0: array<f32, J>;
     var bar: array<f32, J>;
     for (var j = 0u; j < J; j++) {
         let g = gradient(BAR + j, p, x, row);
-        qx[j] = st[at(QX + j, p)] + sigma * g.x;
-        qy[j] = st[at(QY + j, p)] + sigma * g.y;
+        qx0[j] = st[at(QX + j, p)];
+        qy0[j] = st[at(QY + j, p)];
+        qx[j] = qx0[j] + sigma * g.x;
+        qy[j] = qy0[j] + sigma * g.y;
         bar[j] = st[at(BAR + j, p)];
     }
     var n2 = 0.0;
@@ -249,9 +254,12 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             f = lambda / sqrt(n2);
         }
     }
+    // Relaxed: q ← t + (γ − 1)(t − q) with t the projected step (the CPU's `relax`).
     for (var j = 0u; j < J; j++) {
-        st[at(QX + j, p)] = qx[j] * f;
-        st[at(QY + j, p)] = qy[j] * f;
+        let tx = qx[j] * f;
+        let ty = qy[j] * f;
+        st[at(QX + j, p)] = tx + prm.over * (tx - qx0[j]);
+        st[at(QY + j, p)] = ty + prm.over * (ty - qy0[j]);
     }
     if r[at(NBP, p)] == 0.0 && surely_feasible(bar) {
         return;
@@ -262,9 +270,11 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         for (var j = 0u; j < J; j++) {
             u += bcol(j, k) * bar[j];
         }
-        let v = min(r[at(k, p)] + sigma * u, 0.0);
+        let old = r[at(k, p)];
+        let next = min(old + sigma * u, 0.0);
+        let v = next + prm.over * (next - old);
         r[at(k, p)] = v;
-        if v < 0.0 {
+        if v != 0.0 {
             flag = 1.0;
         }
     }
@@ -288,7 +298,7 @@ fn basis_t_times(j: u32, p: u32) -> f32 {
 }
 
 // ---- primal (per pixel): α⁺ = prox_{τf}(α − τ(∇ᵀq + βBᵀr)) in closed form
-// (Sherman–Morrison on (I + τη'Q + τω aaᵀ)⁻¹), then ᾱ = 2α⁺ − α.
+// (Sherman–Morrison on (I + τη'Q + τω aaᵀ)⁻¹) from the relaxed point x, then ᾱ = 2α⁺ − x.
 @compute @workgroup_size(256)
 fn primal(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let p = linear(gid, nwg);
@@ -299,7 +309,7 @@ fn primal(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let row = p / prm.w;
     let tau = sc[SC_TAU];
     let constrained = r[at(NBP, p)] != 0.0;
-    var alpha: array<f32, J>;
+    var start: array<f32, J>;
     var v: array<f32, J>;
     for (var j = 0u; j < J; j++) {
         var left = 0.0;
@@ -311,8 +321,10 @@ fn primal(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
             up = st[at(QY + j, p - prm.w)];
         }
         let div = st[at(QX + j, p)] - left + st[at(QY + j, p)] - up;
-        alpha[j] = st[at(ALPHA + j, p)];
-        v[j] = alpha[j] + tau * div;
+        // The relaxed point x = α + (γ − 1)(ᾱ − α) the prox step starts from (the CPU's).
+        let a = st[at(ALPHA + j, p)];
+        start[j] = a + prm.over * (st[at(BAR + j, p)] - a);
+        v[j] = start[j] + tau * div;
         if constrained {
             v[j] -= tau * basis_t_times(j, p);
         }
@@ -326,7 +338,7 @@ fn primal(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     let coef = t - tab[at(J + 1u, p)] * (mtv + t * tab[at(J + 2u, p)]);
     for (var j = 0u; j < J; j++) {
         let next = mv[j] + coef * tab[at(j, p)];
-        st[at(BAR + j, p)] = 2.0 * next - alpha[j];
+        st[at(BAR + j, p)] = 2.0 * next - start[j];
         st[at(ALPHA + j, p)] = next;
     }
 }
