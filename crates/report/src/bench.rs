@@ -659,18 +659,13 @@ pub fn work_precision_plot(
                     .map(|(l, at)| Text::new(l.clone(), at, ("sans-serif", 13))),
             )
             .map_err(|x| e(&x))?;
-        let picked = ok.iter().filter(|r| {
-            auto.as_ref().is_some_and(|a| {
-                r.setting.method == a.method && r.setting.iterations == a.iterations
-            }) && r.setting.prior == Prior::Tv
-                && r.setting.noise == NoiseAware::Off
-                && r.setting.crop == 0.25
-                && r.setting.window == WindowShape::Square
-        });
+        // At the pick's predicted time and PSNR: a measured point, or one interpolated between
+        // two measured counts of its method.
+        let picked = auto
+            .iter()
+            .map(|a| (a.predicted_seconds.ln(), a.table_psnr_db));
         chart
-            .draw_series(
-                picked.map(|r| Circle::new((r.seconds.ln(), r.psnr_db), 11, RED.stroke_width(3))),
-            )
+            .draw_series(picked.map(|at| Circle::new(at, 11, RED.stroke_width(3))))
             .map_err(|x| e(&x))?
             .label(format!(
                 "method = \"auto\": best within {:.2} s (1 s per 768²)",
