@@ -161,7 +161,11 @@ pub fn pick_from(table: &[Entry], budget_s: f64, pixels: usize) -> Option<Choice
     let scale = pixels as f64 / REFERENCE_PIXELS as f64;
     let measured = table.iter().map(|e| (*e, None));
     let fits = measured
-        .chain(between(table, budget_s / scale))
+        .chain(
+            between(table, budget_s / scale)
+                .into_iter()
+                .map(|(e, from)| (e, Some(from))),
+        )
         .filter(|(e, _)| e.seconds * scale <= budget_s)
         .max_by(|a, b| a.0.psnr_db.total_cmp(&b.0.psnr_db));
     let ((e, from), why) = match fits {
@@ -202,7 +206,7 @@ pub fn pick_from(table: &[Entry], budget_s: f64, pixels: usize) -> Option<Choice
 /// bracket `budget` (seconds at 768²): the largest count in between that fits, its time and PSNR
 /// interpolated linearly in the count (an iterative method's time is affine in it: the joint
 /// rows of [`TABLE`] lie within 3 % of a line). Never beyond the measured range.
-fn between(table: &[Entry], budget: f64) -> Vec<(Entry, Option<[usize; 2]>)> {
+fn between(table: &[Entry], budget: f64) -> Vec<(Entry, [usize; 2])> {
     let mut out = Vec::new();
     for a in table {
         let next = table
@@ -225,7 +229,7 @@ fn between(table: &[Entry], budget: f64) -> Vec<(Entry, Option<[usize; 2]>)> {
             seconds: a.seconds + f * (b.seconds - a.seconds),
             psnr_db: a.psnr_db + f * (b.psnr_db - a.psnr_db),
         };
-        out.push((e, Some([a.iterations, b.iterations])));
+        out.push((e, [a.iterations, b.iterations]));
     }
     out
 }

@@ -798,7 +798,7 @@ impl Joint {
             objective,
             lambda: st.lambda as f64,
             steps: [st.tau as f64, st.sigma as f64],
-            relaxation: Some(self.cfg.relaxation),
+            relaxation: (self.cfg.prior == Prior::Tv).then_some(self.cfg.relaxation),
             violation: 0.0,
             seconds: t0.elapsed().as_secs_f64(),
             prior: format!("{:?}", self.cfg.prior).to_lowercase(),
@@ -819,14 +819,7 @@ impl Joint {
         let dot = |u: &[f32], v: &[f32]| -> f64 {
             u.iter().zip(v).map(|(a, b)| *a as f64 * *b as f64).sum()
         };
-        let start = |s: &JointState| -> Vec<f32> {
-            s.alpha
-                .iter()
-                .zip(&s.bar)
-                .map(|(a, b)| 2.0 * a - b)
-                .collect()
-        };
-        let da = d(&start(after), &start(before));
+        let da = d(&after.start_point(), &before.start_point());
         let (dqx, dqy, dr) = (
             d(&after.qx, &before.qx),
             d(&after.qy, &before.qy),
@@ -978,6 +971,16 @@ impl JointState {
     /// ᾱ = 2α⁺ − x of the last step (x the relaxed point), pixel-major.
     pub fn extrapolated(&self) -> &[f32] {
         &self.bar
+    }
+
+    /// x = 2α − ᾱ: the point the last prox step started from (the primal part of the
+    /// Chambolle–Pock state z = (x, q, r)).
+    fn start_point(&self) -> Vec<f32> {
+        self.alpha
+            .iter()
+            .zip(&self.bar)
+            .map(|(a, b)| 2.0 * a - b)
+            .collect()
     }
 }
 
@@ -1371,9 +1374,12 @@ mod tests {
         plain.step(&mut to_t);
         relaxed.step(&mut to_r);
         let state = |s: &JointState| -> Vec<f64> {
-            let x = s.alpha.iter().zip(&s.bar).map(|(a, b)| 2.0 * a - b);
-            let duals = s.qx.iter().chain(&s.qy).chain(&s.r).copied();
-            x.chain(duals).map(f64::from).collect()
+            let duals = s.qx.iter().chain(&s.qy).chain(&s.r);
+            s.start_point()
+                .iter()
+                .chain(duals)
+                .map(|&v| f64::from(v))
+                .collect()
         };
         let (z, zt, zr) = (state(&st), state(&to_t), state(&to_r));
         let scale = zt

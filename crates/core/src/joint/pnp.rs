@@ -136,7 +136,6 @@ pub fn run(
     stats.steps = [tau, 0.0];
     stats.lambda = 0.0;
     stats.fixed_point = fixed_point;
-    stats.relaxation = None;
     Ok((from_pixel_major(&st.alpha, w, h, j), stats))
 }
 
