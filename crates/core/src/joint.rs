@@ -20,7 +20,6 @@ use std::time::Instant;
 
 pub mod discrepancy;
 mod pnp;
-mod tgv;
 
 /// τσ‖K‖² of the step sizes: below the bound 1 of Chambolle–Pock's convergence theorem.
 const STEP_PRODUCT: f64 = 0.98;
@@ -34,9 +33,6 @@ pub enum Prior {
     Tv,
     /// Plug-and-play ADMM: the guided graph smoother of `denoise.rs` as the prior's proximal step.
     Pnp,
-    /// Second-order total generalised variation on α (TGV², Bredies, Kunisch & Pock 2010), by
-    /// the same Chambolle–Pock iteration: smooth shading costs nothing, edges cost as in TV.
-    Tgv,
 }
 
 /// How λ is set (`[reconstruct.joint] weight_rule`).
@@ -65,11 +61,8 @@ pub struct JointConfig {
     /// 0 < γ < 2; 1 is the plain iteration. 1.8 reaches in 10 iterations what the plain one
     /// reaches in about 15–20 (docs/joint.md). TV prior only.
     pub relaxation: f64,
-    /// TV or TGV (Chambolle–Pock), or plug-and-play (ADMM with a guided smoother).
+    /// TV (Chambolle–Pock) or plug-and-play (ADMM with a guided smoother).
     pub prior: Prior,
-    /// TGV: the second-order weight as a multiple of λ (the first-order weight); 2 is the
-    /// usual choice for images on a pixel grid (Knoll et al. 2011).
-    pub tgv_ratio: f64,
     /// λ fixed by `tv_weight`, or chosen by the discrepancy principle.
     pub weight_rule: WeightRule,
     /// Iterations per trial λ of the discrepancy search (warm started).
@@ -98,7 +91,6 @@ impl Default for JointConfig {
             step_ratio: 1.0,
             relaxation: 1.8,
             prior: Prior::Tv,
-            tgv_ratio: 2.0,
             weight_rule: WeightRule::Fixed,
             search_iterations: 25,
             noise_weights: false,
@@ -144,7 +136,6 @@ impl JointConfig {
             ("step_ratio", self.step_ratio),
             ("pnp_weight", self.pnp_weight),
             ("pnp_edge", self.pnp_edge),
-            ("tgv_ratio", self.tgv_ratio),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(Error::config(
@@ -156,12 +147,12 @@ impl JointConfig {
             }
         }
         if self.weight_rule == WeightRule::Discrepancy {
-            if self.prior != Prior::Tv {
+            if self.prior == Prior::Pnp {
                 return Err(Error::config(
                     file,
                     &key("weight_rule"),
                     "\"discrepancy\"",
-                    "applies to prior = \"tv\" only (the plug-and-play weight is pnp_weight; TGV's is tv_weight)",
+                    "applies to prior = \"tv\" only (the plug-and-play weight is pnp_weight)",
                 ));
             }
             if !(self.tv_weight > 0.0 && self.search_iterations > 0) {
@@ -228,7 +219,7 @@ pub struct Joint {
     nbp: usize,
     /// η'Q = η'(D₂B)ᵀ(D₂B), J × J.
     eq: DMatrix<f64>,
-    /// ‖K‖ bound: √(8 + β²λmax(BᵀB)) = 4 for TV; √24 for TGV ([`tgv`]).
+    /// ‖K‖ bound: √(8 + β²λmax(BᵀB)).
     norm_k: f64,
     system: DMatrix<f64>,
     basis: DMatrix<f64>,
@@ -344,10 +335,7 @@ impl Joint {
                 .collect(),
             nbp,
             eq: eta_joint * d2b.transpose() * &d2b,
-            norm_k: match cfg.prior {
-                Prior::Tgv => tgv::NORM_K,
-                _ => 4.0,
-            },
+            norm_k: 4.0,
             col_range: (0..j)
                 .map(|jj| {
                     let col = basis.column(jj) * beta;
@@ -680,29 +668,21 @@ impl Joint {
             }
             relax(qx, &t[0], over);
             relax(qy, &t[1], over);
-            self.constraint_dual(bp, rp, act, sigma, over);
+            if *act == 0 && self.surely_feasible(bp) {
+                continue;
+            }
+            let mut u = [0.0f32; MAX_BANDS];
+            self.basis_times(bp, &mut u[..nb]);
+            // Counted, not searched with an early exit: the count vectorises with the update.
+            // Relaxed (γ > 1), r may leave r ≤ 0, so the flag is r ≠ 0.
+            let mut nonzero = 0u32;
+            for (rk, uk) in rp.iter_mut().zip(&u[..nb]) {
+                let next = (*rk + sigma * uk).min(0.0);
+                *rk = next + over * (next - *rk);
+                nonzero += (*rk != 0.0) as u32;
+            }
+            *act = (nonzero > 0) as u8;
         }
-    }
-
-    /// One pixel's constraint dual: r ← min(r + σβBᾱ, 0) stored relaxed, skipped where r is 0
-    /// and a bound proves βBᾱ ≥ 0; `act` flags r ≠ 0.
-    #[inline(always)]
-    fn constraint_dual(&self, bp: &[f32], rp: &mut [f32], act: &mut u8, sigma: f32, over: f32) {
-        if *act == 0 && self.surely_feasible(bp) {
-            return;
-        }
-        let nb = self.nbp;
-        let mut u = [0.0f32; MAX_BANDS];
-        self.basis_times(bp, &mut u[..nb]);
-        // Counted, not searched with an early exit: the count vectorises with the update.
-        // Relaxed (γ > 1), r may leave r ≤ 0, so the flag is r ≠ 0.
-        let mut nonzero = 0u32;
-        for (rk, uk) in rp.iter_mut().zip(&u[..nb]) {
-            let next = (*rk + sigma * uk).min(0.0);
-            *rk = next + over * (next - *rk);
-            nonzero += (*rk != 0.0) as u32;
-        }
-        *act = (nonzero > 0) as u8;
     }
 
     /// The primal update of one row given div q there: α⁺ = prox_{τf}(x + τ(div q − βBᵀr)),
@@ -759,10 +739,8 @@ impl Joint {
         seed: &Cube,
         omega: Option<&Cube>,
     ) -> Result<(Cube, JointStats)> {
-        match self.cfg.prior {
-            Prior::Pnp => return pnp::run(self, frame, seed, omega),
-            Prior::Tgv => return tgv::run(self, frame, seed, omega),
-            Prior::Tv => {}
+        if self.cfg.prior == Prior::Pnp {
+            return pnp::run(self, frame, seed, omega);
         }
         let t0 = Instant::now();
         let mut st = self.start(frame, seed, omega)?;
@@ -820,7 +798,7 @@ impl Joint {
             objective,
             lambda: st.lambda as f64,
             steps: [st.tau as f64, st.sigma as f64],
-            relaxation: (self.cfg.prior != Prior::Pnp).then_some(self.cfg.relaxation),
+            relaxation: (self.cfg.prior == Prior::Tv).then_some(self.cfg.relaxation),
             violation: 0.0,
             seconds: t0.elapsed().as_secs_f64(),
             prior: format!("{:?}", self.cfg.prior).to_lowercase(),
