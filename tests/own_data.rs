@@ -54,6 +54,25 @@ fn psnr(stdout: &str) -> f64 {
     after.split(' ').next().unwrap().parse().unwrap()
 }
 
+/// `method = "auto"` (the default) says what it picked and from which device's table, in the
+/// text and in reconstruct.json; on the CPU it reads the CPU's table.
+#[test]
+fn auto_says_which_device_table_it_picked_from() {
+    let d = tmpdir("own-auto");
+    ok(&d, &["demo", "--size", "64", "--out", "demo"]);
+    let cpu = "[scene]\nsource = \"dead-leaves\"\nsize = [64, 64]\n[compute]\ndevice = \"cpu\"\n";
+    std::fs::write(d.join("cpu.toml"), cpu).unwrap();
+    let args = ["reconstruct", "demo/frame.exr", "--experiment", "cpu.toml"];
+    let text = ok(&d, &[&args[..], &["--out", "rec"]].concat());
+    assert!(
+        text.contains("auto: ") && text.contains("on two CPU threads"),
+        "{text}"
+    );
+    let json = std::fs::read_to_string(d.join("rec/reconstruct.json")).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(report["auto"]["measured_on"], "two CPU threads", "{json}");
+}
+
 #[test]
 fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read() {
     let d = tmpdir("own-refuse");

@@ -1,6 +1,7 @@
 //! `[reconstruct.gap] method = "auto"`: the method and iteration count that gives the best final
-//! cube within a time budget, read from a measured work–precision table (the best PSNR among the
-//! entries whose time, scaled by pixel count, fits; the fastest entry when none fits).
+//! cube within a time budget, read from a measured work–precision table of the device that runs
+//! it (the best PSNR among the entries whose time, scaled by pixel count, fits; the fastest entry
+//! when none fits).
 
 use crate::gap::Method;
 use serde::Serialize;
@@ -130,6 +131,75 @@ pub const TABLE: &[Entry] = &[
     },
 ];
 
+/// The GPU's rows: `specmux bench dead-leaves --device gpu --repeats 3` on an NVIDIA H200
+/// (2026-11-26, Vulkan; docs/gpu.md): median seconds of the whole reconstruction of a 768² frame
+/// with the cube read back to the host, the same PSNRs as the CPU's (the GPU's bench grid has
+/// these rows only). The plug-and-play row is left out: it has no GPU kernel and runs on the CPU.
+pub const GPU_TABLE: &[Entry] = &[
+    Entry {
+        method: Method::Fourier,
+        iterations: 0,
+        seconds: 0.029,
+        psnr_db: 13.96,
+    },
+    Entry {
+        method: Method::Gap,
+        iterations: 50,
+        seconds: 0.060,
+        psnr_db: 17.28,
+    },
+    Entry {
+        method: Method::GapTv,
+        iterations: 50,
+        seconds: 0.060,
+        psnr_db: 21.35,
+    },
+    Entry {
+        method: Method::Joint,
+        iterations: 10,
+        seconds: 0.025,
+        psnr_db: 20.45,
+    },
+    Entry {
+        method: Method::Joint,
+        iterations: 20,
+        seconds: 0.028,
+        psnr_db: 22.18,
+    },
+    Entry {
+        method: Method::Joint,
+        iterations: 40,
+        seconds: 0.044,
+        psnr_db: 22.96,
+    },
+    Entry {
+        method: Method::Joint,
+        iterations: 80,
+        seconds: 0.071,
+        psnr_db: 23.28,
+    },
+];
+
+/// A measured table and the device it was measured on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Table<'a> {
+    pub device: &'a str,
+    pub entries: &'a [Entry],
+}
+
+/// The CPU's table ([`TABLE`]): what `auto` reads unless the reconstruction runs on a GPU.
+pub const CPU: Table<'static> = Table {
+    device: "two CPU threads",
+    entries: TABLE,
+};
+
+/// The GPU's table ([`GPU_TABLE`]): what `auto` reads when a hardware GPU runs the
+/// reconstruction (a software adapter emulates one on the CPU, slower than the CPU path).
+pub const GPU: Table<'static> = Table {
+    device: "an NVIDIA H200 GPU",
+    entries: GPU_TABLE,
+};
+
 /// Budget for a 768² frame when `reconstruct.budget_s` is not given (scaled by pixel count).
 pub const DEFAULT_BUDGET_S: f64 = 1.0;
 /// The frame size the table was measured at.
@@ -148,6 +218,8 @@ pub struct Choice {
     /// The two measured iteration counts a count between them was interpolated from.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub interpolated_from: Option<[usize; 2]>,
+    /// The device the table was measured on.
+    pub measured_on: String,
 }
 
 /// The default budget for a frame of `pixels`: 1 s per 768² frame.
@@ -155,9 +227,11 @@ pub fn default_budget(pixels: usize) -> f64 {
     DEFAULT_BUDGET_S * pixels as f64 / REFERENCE_PIXELS as f64
 }
 
-/// The best setting whose time scaled to `pixels` fits `budget_s` — a table entry, or an
+/// The best setting of `table` whose time scaled to `pixels` fits `budget_s` — an entry, or an
 /// iteration count between two measured ones ([`between`]) — or else the fastest entry.
-pub fn pick_from(table: &[Entry], budget_s: f64, pixels: usize) -> Option<Choice> {
+pub fn pick_from(table: Table<'_>, budget_s: f64, pixels: usize) -> Option<Choice> {
+    let Table { device, entries } = table;
+    let table = entries;
     let scale = pixels as f64 / REFERENCE_PIXELS as f64;
     let measured = table.iter().map(|e| (*e, None));
     let fits = measured
@@ -191,7 +265,7 @@ pub fn pick_from(table: &[Entry], budget_s: f64, pixels: usize) -> Option<Choice
         table_psnr_db: e.psnr_db,
         budget_s,
         reason: format!(
-            "{why} ({:?} {} it, {source}: {:.2} s predicted, {:.2} dB on dead-leaves 768²; budget {:.3} s)",
+            "{why} ({:?} {} it, {source} on {device}: {:.2} s predicted, {:.2} dB on dead-leaves 768²; budget {:.3} s)",
             e.method,
             e.iterations,
             e.seconds * scale,
@@ -199,6 +273,7 @@ pub fn pick_from(table: &[Entry], budget_s: f64, pixels: usize) -> Option<Choice
             budget_s
         ),
         interpolated_from: from,
+        measured_on: device.to_string(),
     })
 }
 
@@ -234,14 +309,21 @@ fn between(table: &[Entry], budget: f64) -> Vec<(Entry, [usize; 2])> {
     out
 }
 
-/// [`pick_from`] on the committed [`TABLE`].
-pub fn pick(budget_s: f64, pixels: usize) -> Choice {
-    pick_from(TABLE, budget_s, pixels).expect("the committed table is not empty")
+/// [`pick_from`] on a committed table ([`CPU`] or [`GPU`]; neither is empty).
+pub fn pick(table: Table<'_>, budget_s: f64, pixels: usize) -> Choice {
+    pick_from(table, budget_s, pixels).expect("the committed tables are not empty")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn test_table(entries: &[Entry]) -> Table<'_> {
+        Table {
+            device: "a test machine",
+            entries,
+        }
+    }
 
     #[test]
     fn picks_the_best_that_fits_and_scales_with_the_pixels() {
@@ -266,30 +348,34 @@ mod tests {
             },
         ];
         assert_eq!(
-            pick_from(&t, 1.0, REFERENCE_PIXELS).unwrap().method,
+            pick_from(test_table(&t), 1.0, REFERENCE_PIXELS)
+                .unwrap()
+                .method,
             Method::Gap
         );
         assert_eq!(
-            pick_from(&t, 2.0, REFERENCE_PIXELS).unwrap().method,
+            pick_from(test_table(&t), 2.0, REFERENCE_PIXELS)
+                .unwrap()
+                .method,
             Method::Joint
         );
         // A quarter of the pixels: the joint method's 1.8 s becomes 0.45 s and fits 1 s; the
         // default budget shrinks with the pixels too, so it picks what it picks at 768².
-        let c = pick_from(&t, 1.0, REFERENCE_PIXELS / 4).unwrap();
+        let c = pick_from(test_table(&t), 1.0, REFERENCE_PIXELS / 4).unwrap();
         assert_eq!(c.method, Method::Joint);
         let quarter = REFERENCE_PIXELS / 4;
         assert_eq!(
-            pick_from(&t, default_budget(quarter), quarter)
+            pick_from(test_table(&t), default_budget(quarter), quarter)
                 .unwrap()
                 .method,
             Method::Gap
         );
         assert!(c.reason.contains("within the budget"), "{}", c.reason);
         // Nothing fits: the fastest, said so.
-        let c = pick_from(&t, 0.01, REFERENCE_PIXELS).unwrap();
+        let c = pick_from(test_table(&t), 0.01, REFERENCE_PIXELS).unwrap();
         assert_eq!(c.method, Method::Fourier);
         assert!(c.reason.contains("nothing measured fits"));
-        assert_eq!(pick_from(&[], 1.0, 1), None);
+        assert_eq!(pick_from(test_table(&[]), 1.0, 1), None);
     }
 
     /// A count between two measured ones: time and PSNR interpolated, never extrapolated.
@@ -306,7 +392,7 @@ mod tests {
             entry(Method::Joint, 10, 0.76, 20.45),
             entry(Method::Joint, 20, 1.12, 22.18),
         ];
-        let c = pick_from(&t, 1.0, REFERENCE_PIXELS).unwrap();
+        let c = pick_from(test_table(&t), 1.0, REFERENCE_PIXELS).unwrap();
         // 10 + ⌊(1 − 0.76)/0.36 · 10⌋ = 16; 0.76 + 0.6 · 0.36 s; 20.45 + 0.6 · 1.73 dB.
         assert_eq!((c.method, c.iterations), (Method::Joint, 16));
         assert!((c.predicted_seconds - 0.976).abs() < 1e-12, "{c:?}");
@@ -316,14 +402,14 @@ mod tests {
             .reason
             .contains("interpolated between the measured 10 and 20 it"));
         // The same at a quarter of the pixels with a quarter of the budget.
-        let q = pick_from(&t, 0.25, REFERENCE_PIXELS / 4).unwrap();
+        let q = pick_from(test_table(&t), 0.25, REFERENCE_PIXELS / 4).unwrap();
         assert_eq!((q.iterations, q.interpolated_from), (16, Some([10, 20])));
         // Not one more step fits: the measured 10; beyond the last row: the last row.
-        let c = pick_from(&t, 0.77, REFERENCE_PIXELS).unwrap();
+        let c = pick_from(test_table(&t), 0.77, REFERENCE_PIXELS).unwrap();
         assert_eq!((c.iterations, c.interpolated_from), (10, None));
-        let c = pick_from(&t, 5.0, REFERENCE_PIXELS).unwrap();
+        let c = pick_from(test_table(&t), 5.0, REFERENCE_PIXELS).unwrap();
         assert_eq!((c.iterations, c.interpolated_from), (20, None));
-        let c = pick_from(&t, 0.5, REFERENCE_PIXELS).unwrap();
+        let c = pick_from(test_table(&t), 0.5, REFERENCE_PIXELS).unwrap();
         assert_eq!((c.method, c.iterations), (Method::Gap, 10));
     }
 
@@ -335,7 +421,7 @@ mod tests {
             (2.0, 45, Some([40, 80])),
             (12.0, 80, None),
         ] {
-            let c = pick(budget, REFERENCE_PIXELS);
+            let c = pick(CPU, budget, REFERENCE_PIXELS);
             assert_eq!(
                 (c.method, c.iterations, c.interpolated_from),
                 (Method::Joint, iterations, from),
@@ -343,5 +429,26 @@ mod tests {
                 c.reason
             );
         }
+    }
+
+    /// On the GPU's table the default budget holds every measured setting: the best one, the
+    /// joint method's 80 iterations, measured (never extrapolated beyond it); a budget of 30 ms
+    /// falls between the 20 and 40 iteration rows.
+    #[test]
+    fn the_gpu_table_picks_the_best_measured_joint_count() {
+        let c = pick(GPU, default_budget(REFERENCE_PIXELS), REFERENCE_PIXELS);
+        assert_eq!(
+            (c.method, c.iterations, c.interpolated_from),
+            (Method::Joint, 80, None)
+        );
+        assert!(c.reason.contains("an NVIDIA H200 GPU"), "{}", c.reason);
+        assert_eq!(c.measured_on, GPU.device);
+        // 20 + ⌊(0.030 − 0.028)/(0.044 − 0.028) · 20⌋ = 22 iterations.
+        let c = pick(GPU, 0.030, REFERENCE_PIXELS);
+        assert_eq!(
+            (c.method, c.iterations, c.interpolated_from),
+            (Method::Joint, 22, Some([20, 40]))
+        );
+        assert_eq!(pick(CPU, 1.0, REFERENCE_PIXELS).measured_on, CPU.device);
     }
 }

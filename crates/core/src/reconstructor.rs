@@ -200,15 +200,29 @@ pub struct Reconstructor {
 
 impl Reconstructor {
     /// Build from the design, the settings and the calibration; `file` names the experiment.
+    /// `method = "auto"` reads the CPU's table ([`Reconstructor::for_device`] another's).
     pub fn new(
         cfg: &ReconConfig,
         design: &Design,
         calibration: &Calibration,
         file: &str,
     ) -> Result<Reconstructor> {
+        Reconstructor::for_device(cfg, design, calibration, file, auto::CPU)
+    }
+
+    /// [`Reconstructor::new`] for the device `table` was measured on: `method = "auto"` picks
+    /// from it.
+    pub fn for_device(
+        cfg: &ReconConfig,
+        design: &Design,
+        calibration: &Calibration,
+        file: &str,
+        table: auto::Table<'_>,
+    ) -> Result<Reconstructor> {
         if cfg.gap.method == Method::Auto {
             let pixels = design.width * design.height;
             let choice = auto::pick(
+                table,
                 cfg.budget_s.unwrap_or_else(|| auto::default_budget(pixels)),
                 pixels,
             );

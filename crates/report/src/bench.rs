@@ -239,6 +239,16 @@ impl Device {
         }
     }
 
+    /// The work–precision table `method = "auto"` reads on this device: the GPU's for a
+    /// hardware adapter, else the CPU's (a software adapter is slower than the CPU path).
+    pub fn auto_table(&self) -> specmux_core::auto::Table<'static> {
+        #[cfg(feature = "gpu")]
+        if self.gpu.as_ref().is_some_and(|ctx| !ctx.is_software()) {
+            return specmux_core::auto::GPU;
+        }
+        specmux_core::auto::CPU
+    }
+
     /// "CPU, N threads", or "GPU NAME (backend, type)" flagged when the adapter is software.
     pub fn describe(&self) -> String {
         #[cfg(feature = "gpu")]
@@ -566,7 +576,11 @@ pub fn work_precision_plot(
             psnr_db: r.psnr_db,
         })
         .collect();
-    let auto = auto::pick_from(&entries, auto::default_budget(pixels), pixels);
+    let table = auto::Table {
+        device: "this run",
+        entries: &entries,
+    };
+    let auto = auto::pick_from(table, auto::default_budget(pixels), pixels);
     // The time axis, with room for the labels right of the slowest point.
     let (x0, x1) = (t0 / 1.3, t1 * 2.5);
     plot::render_png(path, (1000, 640), |root| {
@@ -1174,10 +1188,9 @@ mod tests {
             e.contains("x.toml") && e.contains("compute.device") && e.contains("--features gpu"),
             "{e}"
         );
-        assert!(Device::open(ComputeDevice::Auto, "x.toml")
-            .unwrap()
-            .describe()
-            .starts_with("CPU"));
+        let auto = Device::open(ComputeDevice::Auto, "x.toml").unwrap();
+        assert!(auto.describe().starts_with("CPU"));
+        assert_eq!(auto.auto_table(), specmux_core::auto::CPU);
     }
 
     /// On a GPU (lavapipe counts), every setting, the joint method included, runs there and
@@ -1189,6 +1202,15 @@ mod tests {
             Ok(d) => d,
             Err(e) => return eprintln!("{e}: GPU test skipped"),
         };
+        // `auto` reads the GPU's table on a hardware adapter only (lavapipe is slower than the
+        // CPU path), the CPU's on the CPU.
+        let software = device.gpu.as_ref().is_some_and(|c| c.is_software());
+        let want = match software {
+            true => specmux_core::auto::CPU,
+            false => specmux_core::auto::GPU,
+        };
+        assert_eq!(device.auto_table(), want);
+        assert_eq!(Device::cpu().auto_table(), specmux_core::auto::CPU);
         let sim = tiny();
         let setting = |method, iterations| Setting {
             method,

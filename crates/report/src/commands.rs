@@ -97,14 +97,12 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
 /// de-alias (GAP, GAP-TV) and crosstalk mix, unmix, or the joint method's seed and iterations;
 /// `auto` without an adapter stays on the CPU and says so in one line.
 fn reconstruct_on_device(
-    exp: &Experiment,
+    device: &crate::bench::Device,
     recon: &Reconstructor,
     frame: &Cube,
 ) -> Result<(Cube, UnmixStats, String)> {
-    if exp.compute.device != ComputeDevice::Cpu {
-        if let Some(done) = gpu_reconstruct(exp, recon, frame)? {
-            return Ok(done);
-        }
+    if let Some(done) = gpu_reconstruct(device, recon, frame)? {
+        return Ok(done);
     }
     let r = recon.run(frame, None)?;
     let [t_demux, t_gap, t_unmix] = r.seconds;
@@ -113,14 +111,13 @@ fn reconstruct_on_device(
     Ok((r.cube, r.unmix, times))
 }
 
-/// The GPU's chain (specmux-gpu), or None where `auto` found no adapter.
+/// The GPU's chain (specmux-gpu), or None where the device is the CPU.
 #[cfg(feature = "gpu")]
 fn gpu_reconstruct(
-    exp: &Experiment,
+    device: &crate::bench::Device,
     recon: &Reconstructor,
     frame: &Cube,
 ) -> Result<Option<(Cube, UnmixStats, String)>> {
-    let device = crate::bench::Device::open(exp.compute.device, &exp.file)?;
     let Some(ctx) = &device.gpu else {
         return Ok(None);
     };
@@ -143,14 +140,14 @@ fn gpu_reconstruct(
     Ok(Some((cube, run.unmix, times)))
 }
 
-/// Without the `gpu` feature: `gpu` is an error, `auto` stays on the CPU and says so.
+/// Without the `gpu` feature the device is the CPU (`Device::open` refused `gpu`).
 #[cfg(not(feature = "gpu"))]
 fn gpu_reconstruct(
-    exp: &Experiment,
+    _: &crate::bench::Device,
     _: &Reconstructor,
     _: &Cube,
 ) -> Result<Option<(Cube, UnmixStats, String)>> {
-    crate::bench::Device::open(exp.compute.device, &exp.file).map(|_| None)
+    Ok(None)
 }
 
 fn band_names(grid: &Grid) -> Vec<String> {
@@ -582,6 +579,9 @@ struct ReconstructReport {
     calibration: ReconstructCalibration,
     unmix: UnmixStats,
     metrics: Option<specmux_core::metrics::Metrics>,
+    /// What `method = "auto"` picked, from the table of the device that ran it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    auto: Option<specmux_core::auto::Choice>,
 }
 
 #[derive(serde::Serialize)]
@@ -634,8 +634,14 @@ pub fn reconstruct(
         });
     let cal = frame_calibration(&exp, &rig, &materials, measured)?;
     say!(text, "calibration: {}", cal.source);
-    let recon = Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)?;
-    let (cube, stats, times) = reconstruct_on_device(&exp, &recon, &frame)?;
+    let device = crate::bench::Device::open(exp.compute.device, &exp.file)?;
+    let design = rig.design();
+    let table = device.auto_table();
+    let recon = Reconstructor::for_device(&exp.reconstruct, &design, &cal, &exp.file, table)?;
+    if let Some(choice) = &recon.auto {
+        say!(text, "auto: {}", choice.reason);
+    }
+    let (cube, stats, times) = reconstruct_on_device(&device, &recon, &frame)?;
     say!(
         text,
         "{times} ({} pixels bound by r ≥ 0)",
@@ -672,6 +678,7 @@ pub fn reconstruct(
         },
         unmix: stats,
         metrics,
+        auto: recon.auto.clone(),
     };
     specmux_io::json::write_json(&files.path("reconstruct.json"), &report)?;
     crate::panel::write_figures(&exp, lib, truth.as_ref().map(|t| &t.1), &cube, &files)?;
