@@ -55,7 +55,8 @@ fn psnr(stdout: &str) -> f64 {
 }
 
 /// `method = "auto"` (the default) says what it picked and from which device's table, in the
-/// text and in reconstruct.json; on the CPU it reads the CPU's table.
+/// text and in reconstruct.json; on the CPU it reads the CPU's table, and with `auto_table` the
+/// bench report it names.
 #[test]
 fn auto_says_which_device_table_it_picked_from() {
     let d = tmpdir("own-auto");
@@ -71,6 +72,25 @@ fn auto_says_which_device_table_it_picked_from() {
     let json = std::fs::read_to_string(d.join("rec/reconstruct.json")).unwrap();
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["auto"]["measured_on"], "two CPU threads", "{json}");
+    // With `[reconstruct] auto_table` it picks from a bench report of this machine instead.
+    ok(
+        &d,
+        &[
+            "bench",
+            "dead-leaves",
+            "--size",
+            "64",
+            "--repeats",
+            "1",
+            "--out",
+            "b",
+        ],
+    );
+    let own = format!("{cpu}[reconstruct]\nauto_table = \"b/bench.json\"\n");
+    std::fs::write(d.join("own.toml"), own).unwrap();
+    let args = ["reconstruct", "demo/frame.exr", "--experiment", "own.toml"];
+    let text = ok(&d, &[&args[..], &["--out", "rec-own"]].concat());
+    assert!(text.contains("on the bench report b/bench.json"), "{text}");
 }
 
 #[test]

@@ -180,16 +180,18 @@ pub const GPU_TABLE: &[Entry] = &[
     },
 ];
 
-/// A measured table and the device it was measured on.
+/// A measured table, the device it was measured on and the scene its PSNRs are of.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Table<'a> {
     pub device: &'a str,
+    pub scene: &'a str,
     pub entries: &'a [Entry],
 }
 
 /// The CPU's table ([`TABLE`]): what `auto` reads unless the reconstruction runs on a GPU.
 pub const CPU: Table<'static> = Table {
     device: "two CPU threads",
+    scene: "dead-leaves 768²",
     entries: TABLE,
 };
 
@@ -197,6 +199,7 @@ pub const CPU: Table<'static> = Table {
 /// reconstruction (a software adapter emulates one on the CPU, slower than the CPU path).
 pub const GPU: Table<'static> = Table {
     device: "an NVIDIA H200 GPU",
+    scene: "dead-leaves 768²",
     entries: GPU_TABLE,
 };
 
@@ -230,7 +233,11 @@ pub fn default_budget(pixels: usize) -> f64 {
 /// The best setting of `table` whose time scaled to `pixels` fits `budget_s` — an entry, or an
 /// iteration count between two measured ones ([`between`]) — or else the fastest entry.
 pub fn pick_from(table: Table<'_>, budget_s: f64, pixels: usize) -> Option<Choice> {
-    let Table { device, entries } = table;
+    let Table {
+        device,
+        scene,
+        entries,
+    } = table;
     let table = entries;
     let scale = pixels as f64 / REFERENCE_PIXELS as f64;
     let measured = table.iter().map(|e| (*e, None));
@@ -265,7 +272,7 @@ pub fn pick_from(table: Table<'_>, budget_s: f64, pixels: usize) -> Option<Choic
         table_psnr_db: e.psnr_db,
         budget_s,
         reason: format!(
-            "{why} ({:?} {} it, {source} on {device}: {:.2} s predicted, {:.2} dB on dead-leaves 768²; budget {:.3} s)",
+            "{why} ({:?} {} it, {source} on {device}: {:.2} s predicted, {:.2} dB on {scene}; budget {:.3} s)",
             e.method,
             e.iterations,
             e.seconds * scale,
@@ -309,11 +316,6 @@ fn between(table: &[Entry], budget: f64) -> Vec<(Entry, [usize; 2])> {
     out
 }
 
-/// [`pick_from`] on a committed table ([`CPU`] or [`GPU`]; neither is empty).
-pub fn pick(table: Table<'_>, budget_s: f64, pixels: usize) -> Choice {
-    pick_from(table, budget_s, pixels).expect("the committed tables are not empty")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -321,6 +323,7 @@ mod tests {
     fn test_table(entries: &[Entry]) -> Table<'_> {
         Table {
             device: "a test machine",
+            scene: "a test scene",
             entries,
         }
     }
@@ -421,7 +424,7 @@ mod tests {
             (2.0, 45, Some([40, 80])),
             (12.0, 80, None),
         ] {
-            let c = pick(CPU, budget, REFERENCE_PIXELS);
+            let c = pick_from(CPU, budget, REFERENCE_PIXELS).unwrap();
             assert_eq!(
                 (c.method, c.iterations, c.interpolated_from),
                 (Method::Joint, iterations, from),
@@ -436,7 +439,7 @@ mod tests {
     /// falls between the 20 and 40 iteration rows.
     #[test]
     fn the_gpu_table_picks_the_best_measured_joint_count() {
-        let c = pick(GPU, default_budget(REFERENCE_PIXELS), REFERENCE_PIXELS);
+        let c = pick_from(GPU, default_budget(REFERENCE_PIXELS), REFERENCE_PIXELS).unwrap();
         assert_eq!(
             (c.method, c.iterations, c.interpolated_from),
             (Method::Joint, 80, None)
@@ -444,11 +447,14 @@ mod tests {
         assert!(c.reason.contains("an NVIDIA H200 GPU"), "{}", c.reason);
         assert_eq!(c.measured_on, GPU.device);
         // 20 + ⌊(0.030 − 0.028)/(0.044 − 0.028) · 20⌋ = 22 iterations.
-        let c = pick(GPU, 0.030, REFERENCE_PIXELS);
+        let c = pick_from(GPU, 0.030, REFERENCE_PIXELS).unwrap();
         assert_eq!(
             (c.method, c.iterations, c.interpolated_from),
             (Method::Joint, 22, Some([20, 40]))
         );
-        assert_eq!(pick(CPU, 1.0, REFERENCE_PIXELS).measured_on, CPU.device);
+        assert_eq!(
+            pick_from(CPU, 1.0, REFERENCE_PIXELS).unwrap().measured_on,
+            CPU.device
+        );
     }
 }

@@ -88,6 +88,14 @@ pub struct ReconConfig {
     /// Time budget of `gap.method = "auto"` in seconds (default 1 s per 768² frame, scaled by
     /// pixel count).
     pub budget_s: Option<f64>,
+    /// `gap.method = "auto"`: a `specmux bench` report (bench.json) measured on the machine that
+    /// runs the reconstruction, read in place of the committed tables (path relative to the
+    /// experiment file).
+    pub auto_table: Option<String>,
+    /// The rows of `auto_table` (crop 0.25, square window, TV prior, no noise weights), loaded
+    /// with the experiment; not a key of the file.
+    #[serde(skip)]
+    pub measured_table: Option<Vec<auto::Entry>>,
 }
 
 impl Default for ReconConfig {
@@ -102,6 +110,8 @@ impl Default for ReconConfig {
             crosstalk: CrosstalkCorrection::Timing,
             crosstalk_weights: None,
             budget_s: None,
+            auto_table: None,
+            measured_table: None,
         }
     }
 }
@@ -221,11 +231,29 @@ impl Reconstructor {
     ) -> Result<Reconstructor> {
         if cfg.gap.method == Method::Auto {
             let pixels = design.width * design.height;
-            let choice = auto::pick(
+            let measured = measured_table(cfg, file)?;
+            let table = match &measured {
+                Some((report, entries)) => auto::Table {
+                    device: report,
+                    scene: "its scene",
+                    entries,
+                },
+                None => table,
+            };
+            let choice = auto::pick_from(
                 table,
                 cfg.budget_s.unwrap_or_else(|| auto::default_budget(pixels)),
                 pixels,
-            );
+            )
+            .ok_or_else(|| {
+                let path = cfg.auto_table.as_deref().unwrap_or("the committed table");
+                Error::config(
+                    file,
+                    "reconstruct.auto_table",
+                    path,
+                    "holds no rows to pick from",
+                )
+            })?;
             let mut resolved = cfg.clone();
             resolved.gap.method = choice.method;
             match choice.method {
@@ -406,6 +434,24 @@ impl Reconstructor {
     /// r̂ = B α per pixel, non-negative (times the light gains L̃ for a lit radiance scene).
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
         self.unmixer.unmix(xhat)
+    }
+}
+
+/// `[reconstruct] auto_table`'s rows and how the reason names them ("the bench report PATH");
+/// None without the key.
+fn measured_table<'a>(
+    cfg: &'a ReconConfig,
+    file: &str,
+) -> Result<Option<(String, &'a [auto::Entry])>> {
+    match (&cfg.auto_table, &cfg.measured_table) {
+        (None, _) => Ok(None),
+        (Some(path), Some(entries)) => Ok(Some((format!("the bench report {path}"), entries))),
+        (Some(path), None) => Err(Error::config(
+            file,
+            "reconstruct.auto_table",
+            path,
+            "was not read (the experiment loader reads it; set measured_table when building the settings by hand)",
+        )),
     }
 }
 

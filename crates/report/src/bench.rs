@@ -369,6 +369,9 @@ pub struct BenchRow {
     pub stage_seconds: [f64; 3],
     /// On the Pareto front of (seconds, psnr_db).
     pub pareto: bool,
+    /// The frame [width, height] it was timed on (`[reconstruct] auto_table` scales the time
+    /// by the pixel count).
+    pub frame: [usize; 2],
 }
 
 /// Median of a non-empty slice (mean of the middle two for an even count).
@@ -500,6 +503,7 @@ pub fn work_precision_on(
             seconds_all: t,
             stage_seconds: st.map(|v| median(&v)),
             pareto: false,
+            frame: [sim.frame.width, sim.frame.height],
         });
     }
     let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.seconds, r.psnr_db)).collect();
@@ -578,6 +582,7 @@ pub fn work_precision_plot(
         .collect();
     let table = auto::Table {
         device: "this run",
+        scene: "this run's scene",
         entries: &entries,
     };
     let auto = auto::pick_from(table, auto::default_budget(pixels), pixels);

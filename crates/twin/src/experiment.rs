@@ -104,6 +104,11 @@ impl Experiment {
             e.scene = adopted;
         }
         e.validate()?;
+        if let Some(rel) = e.reconstruct.auto_table.clone() {
+            let path = e.scene.path(&rel, &e.file);
+            let entries = crate::auto_table::load(&path, &rel, &e.file)?;
+            e.reconstruct.measured_table = Some(entries);
+        }
         Ok(e)
     }
 

@@ -3,6 +3,7 @@
 //! composes their configurations, the rig resolves it, the forward pipeline runs the stages,
 //! and the captures simulate the calibration frames a real rig would record.
 
+pub mod auto_table;
 pub mod budget;
 pub mod captures;
 pub mod device;
