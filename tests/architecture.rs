@@ -50,8 +50,8 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     (
         "twin",
         // The compute device the GPU stages share, the light path, then the calibration captures
-        // made with it; experiment composes the section configs of all of these; rig, forward
-        // and run consume it.
+        // made with it and the bench report auto may read; experiment composes the section
+        // configs of all of these; rig, forward and run consume it.
         &[
             &["device"],
             &["scene"],
@@ -60,6 +60,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
             &["sensor"],
             &["multiplex"],
             &["captures"],
+            &["auto_table"],
             &["experiment"],
             &["budget"],
             &["rig"],
