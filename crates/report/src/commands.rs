@@ -579,8 +579,8 @@ struct ReconstructReport {
     calibration: ReconstructCalibration,
     unmix: UnmixStats,
     metrics: Option<specmux_core::metrics::Metrics>,
-    /// What `method = "auto"` picked, from the table of the device that ran it.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// What `method = "auto"` picked, from the table of the device that ran it (null for the
+    /// other methods).
     auto: Option<specmux_core::auto::Choice>,
 }
 
