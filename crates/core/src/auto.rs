@@ -3,7 +3,9 @@
 //! it (the best PSNR among the entries whose time, scaled by pixel count, fits; the fastest entry
 //! when none fits).
 
+use crate::demux::WindowShape;
 use crate::gap::Method;
+use crate::joint::Prior;
 use serde::Serialize;
 
 /// One measured setting (crop 0.25, square window): median seconds of the whole reconstruction
@@ -223,6 +225,17 @@ pub struct Choice {
     pub interpolated_from: Option<[usize; 2]>,
     /// The device the table was measured on.
     pub measured_on: String,
+}
+
+/// True for the bench rows the tables hold: crop 0.25, square window, TV prior, no noise
+/// weights (`specmux bench` and `[reconstruct] auto_table` select them alike).
+pub fn tabled(crop: f64, window: WindowShape, prior: Prior, noise_weighted: bool) -> bool {
+    crop == 0.25 && window == WindowShape::Square && prior == Prior::Tv && !noise_weighted
+}
+
+/// A time measured on a frame of `pixels`, scaled to the tables' 768² frame.
+pub fn at_reference(seconds: f64, pixels: usize) -> f64 {
+    seconds * REFERENCE_PIXELS as f64 / pixels as f64
 }
 
 /// The default budget for a frame of `pixels`: 1 s per 768² frame.

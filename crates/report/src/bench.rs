@@ -568,15 +568,13 @@ pub fn work_precision_plot(
     let entries: Vec<auto::Entry> = ok
         .iter()
         .filter(|r| {
-            r.setting.crop == 0.25
-                && r.setting.window == WindowShape::Square
-                && r.setting.prior == Prior::Tv
-                && r.setting.noise == NoiseAware::Off
+            let s = &r.setting;
+            auto::tabled(s.crop, s.window, s.prior, s.noise != NoiseAware::Off)
         })
         .map(|r| auto::Entry {
             method: r.setting.method,
             iterations: r.setting.iterations,
-            seconds: r.seconds * auto::REFERENCE_PIXELS as f64 / pixels as f64,
+            seconds: auto::at_reference(r.seconds, pixels),
             psnr_db: r.psnr_db,
         })
         .collect();

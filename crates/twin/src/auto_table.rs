@@ -4,7 +4,7 @@
 //! scaled to a 768² frame by the pixel count it was measured at.
 
 use serde::Deserialize;
-use specmux_core::auto::{Entry, REFERENCE_PIXELS};
+use specmux_core::auto::{at_reference, tabled, Entry};
 use specmux_core::demux::WindowShape;
 use specmux_core::error::{Error, Result};
 use specmux_core::gap::Method;
@@ -51,11 +51,7 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
     let mut entries = Vec::new();
     for (i, r) in report.rows.iter().enumerate() {
         let s = &r.setting;
-        let usable = s.crop == 0.25
-            && s.window == WindowShape::Square
-            && s.prior == Prior::Tv
-            && s.noise == "off";
-        if !usable {
+        if !tabled(s.crop, s.window, s.prior, s.noise != "off") {
             continue;
         }
         let Some([w, h]) = r.frame.filter(|[w, h]| w * h > 0) else {
@@ -75,7 +71,7 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
         entries.push(Entry {
             method: s.method,
             iterations: s.iterations,
-            seconds: r.seconds * REFERENCE_PIXELS as f64 / (w * h) as f64,
+            seconds: at_reference(r.seconds, w * h),
             psnr_db: r.psnr_db,
         });
     }
