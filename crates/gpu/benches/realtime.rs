@@ -1,7 +1,7 @@
 //! Medians of the real-time path on the CPU and on the GPU, 768 × 768, the prototype on
 //! dead-leaves and on shaded objects: the GPU FFT alone, demultiplexing, unmixing, and the
 //! whole frame with and without reading the 31-band cube back; then the whole chain with 50
-//! iterations of GAP and of GAP-TV (docs/gpu.md). Each figure is the median wall time of
+//! iterations of GAP and of GAP-TV and with 80 of the joint method (docs/gpu.md). Each figure is the median wall time of
 //! REPEATS runs after WARMUP (GAP_REPEATS for the CPU's GAP rows, seconds each), the GPU ones
 //! from submission to the finished work (and the host copy where one is named).
 //!
@@ -177,10 +177,25 @@ fn simulate(name: &str, toml: &str) -> (Cube, Reconstructor) {
     (sim.frame, recon)
 }
 
-/// The whole chain with 50 iterations of `method` (gap or gap-tv), CPU against GPU.
-fn bench_gap(ctx: &GpuContext, name: &str, toml: &str, method: &str, repeats: usize) {
-    let what = format!("{method} 50 it");
-    let toml = format!("{toml}[reconstruct.gap]\nmethod = \"{method}\"\niterations = 50\n");
+/// The experiment's lines for `iterations` of `method` (gap, gap-tv or joint).
+fn method_toml(method: &str, iterations: usize) -> String {
+    let count = format!("iterations = {iterations}\n");
+    match method {
+        "joint" => format!("[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\n{count}"),
+        _ => format!("[reconstruct.gap]\nmethod = \"{method}\"\n{count}"),
+    }
+}
+
+/// The whole chain with `iterations` of `method` (gap, gap-tv or joint), CPU against GPU.
+fn bench_gap(
+    ctx: &GpuContext,
+    name: &str,
+    toml: &str,
+    (method, iterations): (&str, usize),
+    repeats: usize,
+) {
+    let what = format!("{method} {iterations} it");
+    let toml = format!("{toml}{}", method_toml(method, iterations));
     let (frame, recon) = simulate(name, &toml);
     row(
         name,
@@ -373,7 +388,7 @@ fn main() {
     let shaded = format!("{dead}source = \"shaded-objects\"\nseed = 11\n");
     bench_scene(&ctx, "dead-leaves", &dead, repeats);
     bench_scene(&ctx, "shaded-objects", &shaded, repeats);
-    for method in ["gap", "gap-tv"] {
+    for method in [("gap", 50), ("gap-tv", 50), ("joint", 80)] {
         bench_gap(&ctx, "dead-leaves", &dead, method, repeats);
         bench_gap(&ctx, "shaded-objects", &shaded, method, repeats);
     }

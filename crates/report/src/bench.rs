@@ -168,10 +168,20 @@ pub fn default_grid() -> Vec<Setting> {
     g
 }
 
-/// The grid for `sim`: the default grid, and where the rig has a camera (a noise model) the
-/// joint method's noise-aware rows — weighted, and with the discrepancy λ — at 20, 40, 80 it.
-pub fn grid_for(sim: &Simulated) -> Vec<Setting> {
+/// Joint TV iteration counts a hardware GPU adds to the grid: at well under 1 ms an iteration
+/// (docs/gpu.md) its `auto` table reaches past the CPU's 80.
+pub const GPU_JOINT_ITERATIONS: [usize; 3] = [160, 320, 640];
+
+/// The grid for `sim` on `device`: the default grid; on a hardware GPU the joint method at
+/// [`GPU_JOINT_ITERATIONS`] too; and where the rig has a camera (a noise model) the joint
+/// method's noise-aware rows — weighted, and with the discrepancy λ — at 20, 40, 80 it.
+pub fn grid_for(sim: &Simulated, device: &Device) -> Vec<Setting> {
     let mut g = default_grid();
+    if device.is_hardware_gpu() {
+        for iterations in GPU_JOINT_ITERATIONS {
+            g.push(joint_setting(iterations, Prior::Tv, NoiseAware::Off));
+        }
+    }
     if sim.rig.design().noise.is_some() {
         for noise in [NoiseAware::Weighted, NoiseAware::Discrepancy] {
             for iterations in [20, 40, 80] {
@@ -242,11 +252,20 @@ impl Device {
     /// The work–precision table `method = "auto"` reads on this device: the GPU's for a
     /// hardware adapter, else the CPU's (a software adapter is slower than the CPU path).
     pub fn auto_table(&self) -> specmux_core::auto::Table<'static> {
-        #[cfg(feature = "gpu")]
-        if self.gpu.as_ref().is_some_and(|ctx| !ctx.is_software()) {
-            return specmux_core::auto::GPU;
+        match self.is_hardware_gpu() {
+            true => specmux_core::auto::GPU,
+            false => specmux_core::auto::CPU,
         }
-        specmux_core::auto::CPU
+    }
+
+    /// A GPU that is not a software adapter (lavapipe emulates one on the CPU, slower than
+    /// the CPU path).
+    pub fn is_hardware_gpu(&self) -> bool {
+        #[cfg(feature = "gpu")]
+        if let Some(ctx) = &self.gpu {
+            return !ctx.is_software();
+        }
+        false
     }
 
     /// "CPU, N threads", or "GPU NAME (backend, type)" flagged when the adapter is software.
@@ -1101,11 +1120,11 @@ mod tests {
     #[test]
     fn a_rig_with_a_camera_adds_the_noise_aware_joint_rows() {
         let sim = tiny();
-        assert_eq!(grid_for(&sim), default_grid());
+        assert_eq!(grid_for(&sim, &Device::cpu()), default_grid());
         let mut exp = sim.exp.clone();
         exp.rig.sensor = Some(Default::default());
         let noisy = simulate(&exp, &Library::default_root()).unwrap();
-        let grid = grid_for(&noisy);
+        let grid = grid_for(&noisy, &Device::cpu());
         let extra = &grid[default_grid().len()..];
         assert_eq!(extra.len(), 6);
         assert_eq!(

@@ -232,8 +232,12 @@ pub fn bench(
         sim.frame.height,
         device.describe()
     );
-    let rows =
-        crate::bench::work_precision_on(&device, &sim, &crate::bench::grid_for(&sim), repeats)?;
+    let rows = crate::bench::work_precision_on(
+        &device,
+        &sim,
+        &crate::bench::grid_for(&sim, &device),
+        repeats,
+    )?;
     let md = crate::bench::work_precision_markdown(&rows);
     say!(text, "{md}");
     let files = OutputSet::begin(out)?;
