@@ -8,6 +8,23 @@ use crate::Cube;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// The joint method's per-pixel data weights ω and the pixels whose raw value reads the camera's
+/// saturation: their measurement is only a lower bound, so the data term there is one-sided
+/// (ω/2·max(0, y − aᵀα)², a censored observation).
+#[derive(Clone, Debug, PartialEq)]
+pub struct DataWeights {
+    pub omega: Cube,
+    pub saturated: Vec<bool>,
+}
+
+impl DataWeights {
+    /// Weights ω with no pixel saturated.
+    pub fn new(omega: Cube) -> DataWeights {
+        let saturated = vec![false; omega.pixels()];
+        DataWeights { omega, saturated }
+    }
+}
+
 /// EMVA 1288 linear camera model: σ_y² = σ_y.dark² + K·(μ_y − μ_y.dark) in DN².
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct NoiseModel {
@@ -16,6 +33,11 @@ pub struct NoiseModel {
     /// Temporal dark noise σ_y.dark (DN rms) at the rig's exposure: read noise, dark-current
     /// shot noise and quantisation together, as the photon-transfer dark point measures it.
     pub dark_noise_dn: f64,
+    /// The raw value (DN) of a saturated pixel: round(K·μ_e.sat + black offset), or the ADC's top
+    /// when that comes first (EMVA 1288 saturation). A pixel at or above it holds only a lower
+    /// bound of its signal (a censored observation, [`DataWeights`]). None: not known.
+    #[serde(default)]
+    pub saturation_dn: Option<f64>,
 }
 
 impl NoiseModel {
@@ -32,26 +54,54 @@ impl NoiseModel {
                 )));
             }
         }
-        Ok(())
+        match self.saturation_dn {
+            Some(v) if !(v.is_finite() && v > 0.0) => Err(Error::Numerical(format!(
+                "{what}: noise model saturation_dn = {v} must be finite and > 0"
+            ))),
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether a raw value reads the saturation level (rounded to the DN).
+    fn saturated(&self, raw: f32) -> bool {
+        self.saturation_dn.is_some_and(|s| raw as f64 >= s - 0.5)
     }
 
     /// ω_p = 1/var(y_p) of a linearised frame y = g⊙(raw − dark), g_p the flat-field gain
-    /// mean(flat − dark)/(flat_p − dark_p): var(y_p) = g_p²σ_y.dark² + g_p·K·max(y_p, 0).
-    /// Without a dark/flat correction g = 1 (the frame is taken as raw DN above dark).
-    pub fn weights(&self, y: &Cube, dark_flat: Option<&DarkFlat>) -> Result<Cube> {
+    /// mean(flat − dark)/(flat_p − dark_p): var(y_p) = g_p²σ_y.dark² + g_p·K·max(y_p, 0), and
+    /// the pixels where the `raw` frame reads the saturation level. Without a dark/flat
+    /// correction g = 1 (the frame is taken as raw DN above dark). A frame saturated everywhere
+    /// is refused: it bounds the light from below and says nothing else.
+    pub fn weights(
+        &self,
+        raw: &Cube,
+        y: &Cube,
+        dark_flat: Option<&DarkFlat>,
+    ) -> Result<DataWeights> {
         self.validate("noise weights")?;
+        y.check_same_shape(raw, "noise weights: linearised frame against raw frame")?;
         let gains = match dark_flat {
             Some(df) => flat_gains(df, y)?,
             None => vec![1.0; y.pixels()],
         };
         let (s2, k) = (self.dark_noise_dn.powi(2), self.gain_dn_per_e);
-        let data = y
+        let data: Vec<f32> = y
             .data
             .par_iter()
             .zip(&gains)
             .map(|(&v, &g)| (1.0 / (g * g * s2 + g * k * (v as f64).max(0.0))) as f32)
             .collect();
-        Cube::from_vec(y.width, y.height, 1, data)
+        let saturated: Vec<bool> = raw.data.iter().map(|&r| self.saturated(r)).collect();
+        if !saturated.is_empty() && saturated.iter().all(|&s| s) {
+            return Err(Error::Numerical(format!(
+                "noise weights: every pixel of the frame reads the camera's saturation level ({} DN): no measurement is left to reconstruct from; shorten the exposure",
+                self.saturation_dn.unwrap_or(f64::NAN)
+            )));
+        }
+        Ok(DataWeights {
+            omega: Cube::from_vec(y.width, y.height, 1, data)?,
+            saturated,
+        })
     }
 }
 
@@ -89,17 +139,18 @@ mod tests {
         let m = NoiseModel {
             gain_dn_per_e: 0.5,
             dark_noise_dn: 2.0,
+            saturation_dn: None,
         };
         let df = DarkFlat {
             dark: Cube::from_vec(2, 1, 1, vec![10.0, 10.0]).unwrap(),
             flat: Cube::from_vec(2, 1, 1, vec![110.0, 60.0]).unwrap(),
         };
         let y = Cube::from_vec(2, 1, 1, vec![30.0, -4.0]).unwrap();
-        let w = m.weights(&y, Some(&df)).unwrap();
+        let w = m.weights(&y, &y, Some(&df)).unwrap().omega;
         assert!((w.data[0] - 1.0 / 13.5).abs() < 1e-7, "{:?}", w.data);
         assert!((w.data[1] - 1.0 / 9.0).abs() < 1e-7, "{:?}", w.data);
         // Without dark/flat: var = σ² + K·y.
-        let w = m.weights(&y, None).unwrap();
+        let w = m.weights(&y, &y, None).unwrap().omega;
         assert!((w.data[0] - 1.0 / 19.0).abs() < 1e-7 && (w.data[1] - 0.25).abs() < 1e-7);
     }
 
@@ -137,9 +188,11 @@ mod tests {
             let w = NoiseModel {
                 gain_dn_per_e: k,
                 dark_noise_dn: sd,
+                saturation_dn: None,
             }
-            .weights(&y, Some(&df))
-            .unwrap();
+            .weights(&y, &y, Some(&df))
+            .unwrap()
+            .omega;
             let predicted = 1.0 / w.data[p] as f64;
             // 20000 samples: the sample variance is within ±3 % (about 3 σ) of the truth.
             assert!(
@@ -149,13 +202,48 @@ mod tests {
         }
     }
 
+    /// Saturation by hand: level 3882 DN; raw (3882, 3881.6, 3881.4, 4095) → the first, second
+    /// (rounds to 3882) and last read it, the third does not; ω stays σ² + K·y = 4 + 0.5·100
+    /// everywhere (the one-sided data term keeps the weight).
     #[test]
-    fn bad_models_are_refused() {
+    fn saturated_pixels_are_flagged() {
         let m = NoiseModel {
             gain_dn_per_e: 0.5,
-            dark_noise_dn: 0.0,
+            dark_noise_dn: 2.0,
+            saturation_dn: Some(3882.0),
         };
-        let e = m.weights(&Cube::zeros(2, 1, 1), None).unwrap_err();
+        let raw = Cube::from_vec(4, 1, 1, vec![3882.0, 3881.6, 3881.4, 4095.0]).unwrap();
+        let y = Cube::from_vec(4, 1, 1, vec![100.0; 4]).unwrap();
+        let w = m.weights(&raw, &y, None).unwrap();
+        assert_eq!(w.saturated, [true, true, false, true]);
+        assert!(
+            w.omega.data.iter().all(|&v| (v - 1.0 / 54.0).abs() < 1e-7),
+            "{w:?}"
+        );
+        // Every pixel saturated: nothing to reconstruct from, refused naming the level.
+        let all = Cube::from_vec(4, 1, 1, vec![3900.0; 4]).unwrap();
+        let e = m.weights(&all, &y, None).unwrap_err().to_string();
+        assert!(e.contains("every pixel") && e.contains("3882 DN"), "{e}");
+        // A raw frame of another size is a shape error, not a silent zip.
+        let e = m.weights(&Cube::zeros(2, 1, 1), &y, None).unwrap_err();
+        assert!(e.to_string().contains("raw frame"), "{e}");
+    }
+
+    #[test]
+    fn bad_models_are_refused() {
+        let mut m = NoiseModel {
+            gain_dn_per_e: 0.5,
+            dark_noise_dn: 0.0,
+            saturation_dn: None,
+        };
+        let zeros = Cube::zeros(2, 1, 1);
+        let e = m.weights(&zeros, &zeros, None).unwrap_err();
         assert!(e.to_string().contains("dark_noise_dn = 0"), "{e}");
+        m.dark_noise_dn = 1.0;
+        for bad in [0.0, -1.0, f64::NAN] {
+            m.saturation_dn = Some(bad);
+            let e = m.weights(&zeros, &zeros, None).unwrap_err();
+            assert!(e.to_string().contains("saturation_dn"), "{e}");
+        }
     }
 }

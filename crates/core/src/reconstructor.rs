@@ -353,7 +353,9 @@ impl Reconstructor {
         let t1 = t.elapsed().as_secs_f64();
         if let Some(j) = &self.joint {
             let omega = match &self.noise {
-                Some(nm) => Some(nm.weights(&measured, self.calibration.dark_flat.as_ref())?),
+                Some(nm) => {
+                    Some(nm.weights(frame, &measured, self.calibration.dark_flat.as_ref())?)
+                }
                 None => None,
             };
             let seed = self.unconstrained_alpha(&xhat)?;
@@ -567,6 +569,7 @@ mod tests {
         let nm = NoiseModel {
             gain_dn_per_e: 0.25,
             dark_noise_dn: 0.8,
+            saturation_dn: None,
         };
         assert_eq!(joint_noise(&cfg, Some(nm), "rig.toml").unwrap(), Some(nm));
         let off = JointConfig {

@@ -33,6 +33,7 @@ mod common;
 use nalgebra::DMatrix;
 use specmux_core::carriers::default_layout;
 use specmux_core::joint::{Joint, JointConfig};
+use specmux_core::noise::DataWeights;
 use specmux_core::Cube;
 use specmux_gpu::joint::GpuJoint;
 use specmux_gpu::{wgpu, GpuContext};
@@ -242,7 +243,8 @@ fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
     let omega = Cube::from_vec(W, H, 1, omega).unwrap();
     let gains: Vec<f64> = (0..BANDS).map(|k| 0.5 + k as f64 / BANDS as f64).collect();
     let (alpha, cpu) = {
-        let mut st = joint.start(&frame, &seed, Some(&omega)).unwrap();
+        let weights = DataWeights::new(omega.clone());
+        let mut st = joint.start(&frame, &seed, Some(&weights)).unwrap();
         let mut objective: Vec<f64> = (0..iterations).map(|_| joint.step(&mut st)).collect();
         objective.push(joint.objective(&mut st));
         (

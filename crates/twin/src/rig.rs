@@ -48,14 +48,15 @@ pub struct Rig {
     pub noise: Option<NoiseModel>,
 }
 
-/// K and σ_y.dark of a camera, the figures an EMVA 1288 measurement reports:
-/// σ_y.dark² = K²(σ_d² + μ_dark) + 1/12 DN² (read noise, dark-current shot noise at the
-/// exposure, uniform quantisation).
+/// K, σ_y.dark and the saturation level of a camera, the figures an EMVA 1288 measurement
+/// reports: σ_y.dark² = K²(σ_d² + μ_dark) + 1/12 DN² (read noise, dark-current shot noise at
+/// the exposure, uniform quantisation).
 pub fn noise_model(s: &SensorConfig) -> NoiseModel {
     let k = s.gain_dn_per_e;
     NoiseModel {
         gain_dn_per_e: k,
         dark_noise_dn: (k * k * (s.read_noise_e.powi(2) + s.dark_electrons()) + 1.0 / 12.0).sqrt(),
+        saturation_dn: Some(s.saturation_dn()),
     }
 }
 
@@ -285,11 +286,19 @@ mod tests {
     use crate::sensor::Sensor;
 
     /// The default camera by hand: K = 0.25 DN/e⁻, σ_d² = 10 e⁻², dark current 30 e⁻/s ×
-    /// 2^((22 − 30)/8) × 0.04 s = 0.6 e⁻, so σ_y.dark² = 0.0625 × 10.6 + 1/12 = 0.745833 DN².
+    /// 2^((22 − 30)/8) × 0.04 s = 0.6 e⁻, so σ_y.dark² = 0.0625 × 10.6 + 1/12 = 0.745833 DN²;
+    /// saturation 0.25 × 15000 + 132 = 3882 DN (under the 12-bit ADC's 4095; at 10 bit its 1023).
     #[test]
     fn the_noise_model_of_the_default_camera_by_hand() {
         let m = noise_model(&SensorConfig::default());
         assert_eq!(m.gain_dn_per_e, 0.25);
+        assert_eq!(m.saturation_dn, Some(3882.0));
+        let ten_bit = SensorConfig {
+            bits: 10,
+            black_offset_dn: 33.0,
+            ..Default::default()
+        };
+        assert_eq!(noise_model(&ten_bit).saturation_dn, Some(1023.0));
         assert!(
             (m.dark_noise_dn.powi(2) - 0.745_833_3).abs() < 1e-6,
             "{m:?}"

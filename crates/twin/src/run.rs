@@ -505,6 +505,12 @@ fn joint_noise_line(j: &specmux_core::joint::JointStats) -> String {
         "joint prior {}: {weights} = {:.3}",
         j.prior, j.residual_ratio
     );
+    if j.saturated_pixels > 0 {
+        s += &format!(
+            "; {} saturated pixels fitted one-sided (aᵀα ≥ y costs nothing)",
+            j.saturated_pixels
+        );
+    }
     if let Some(d) = &j.discrepancy {
         s += &format!(
             "; λ by the discrepancy principle: {:.3e} after {} trials ({})",

@@ -15,6 +15,7 @@
 use super::{from_pixel_major, prox_pixel, with_basis_len, Joint, JointStats, MAX_J};
 use crate::denoise::GraphSmoother;
 use crate::error::{Error, Result};
+use crate::noise::DataWeights;
 use crate::unmix::Unmixer;
 use crate::Cube;
 use nalgebra::DMatrix;
@@ -41,7 +42,7 @@ pub fn run(
     joint: &Joint,
     frame: &Cube,
     seed: &Cube,
-    omega: Option<&Cube>,
+    omega: Option<&DataWeights>,
 ) -> Result<(Cube, JointStats)> {
     let t0 = Instant::now();
     let cfg = &joint.cfg;
@@ -68,7 +69,7 @@ pub fn run(
         false => None,
     };
     let copies = if projector.is_some() { 2.0 } else { 1.0 };
-    let (mat, m, tck) = joint.prox_tables(tau / copies, &st.y, &st.omega)?;
+    let (mat, m, tck) = joint.prox_tables(tau / copies, &st)?;
     let n = st.alpha.len();
     let mut s = Admm {
         x: st.alpha.clone(),

@@ -95,6 +95,14 @@ impl SensorConfig {
         ((1u64 << self.bits) - 1) as f64
     }
 
+    /// The output of a pixel whose charge reached the full well (DN): round(K·μ_e.sat + offset),
+    /// or the ADC's top rail when that comes first.
+    pub fn saturation_dn(&self) -> f64 {
+        (self.gain_dn_per_e * self.full_well_e + self.black_offset_dn)
+            .round()
+            .min(self.max_dn())
+    }
+
     /// Mean dark-current electrons per frame: I_ref · 2^((T − T_ref)/T_d) · t_exp.
     pub fn dark_electrons(&self) -> f64 {
         self.dark_current_e_per_s

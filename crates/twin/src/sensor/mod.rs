@@ -136,9 +136,7 @@ impl Sensor {
     /// The output of a pixel whose charge reached the full well (DN): round(K·μ_e.sat + offset),
     /// or the ADC's top rail when that comes first.
     pub fn saturation_dn(&self) -> f64 {
-        (self.cfg.gain_dn_per_e * self.cfg.full_well_e + self.cfg.black_offset_dn)
-            .round()
-            .min(self.max_dn())
+        self.cfg.saturation_dn()
     }
 
     /// The PRNU gain map (1 + p_i), if PRNU is modelled.
