@@ -77,7 +77,7 @@ impl FrameStats {
     fn warning(&self) -> Option<String> {
         (self.saturated_pixels * 1000 > self.pixels).then(|| {
             format!(
-                "{} of {} pixels ({:.1} %) are saturated: the reconstruction there is wrong; lower the light (rig.sensor.electrons_at_full_scale)",
+                "{} of {} pixels ({:.1} %) are saturated: the reconstruction there is wrong (the joint method with noise_weights = true takes them as lower bounds, the others as readings); lower the light (rig.sensor.electrons_at_full_scale)",
                 self.saturated_pixels,
                 self.pixels,
                 100.0 * self.saturated_pixels as f64 / self.pixels as f64
