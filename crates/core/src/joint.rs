@@ -1620,6 +1620,14 @@ mod tests {
             "{:?}",
             st.objective
         );
+        // The same clipped rows flagged as saturated (one-sided data term): finite, counted.
+        let flagged = DataWeights {
+            omega: Cube::from_vec(32, 32, 1, vec![1.0; 32 * 32]).unwrap(),
+            saturated: (0..32 * 32).map(|p| p < 32 * 22).collect(),
+        };
+        let (est, st) = j.run(&y, &flat_seed(&t), Some(&flagged)).unwrap();
+        assert!(est.all_finite() && st.objective.iter().all(|v| v.is_finite()));
+        assert_eq!(st.saturated_pixels, 32 * 22);
         // Two filters alike to 1e-9 (F near-singular): the prior keeps the problem posed.
         let b = basis();
         let f = near_singular(&b);
