@@ -92,10 +92,10 @@ impl NoiseModel {
             .map(|(&v, &g)| (1.0 / (g * g * s2 + g * k * (v as f64).max(0.0))) as f32)
             .collect();
         let saturated: Vec<bool> = raw.data.iter().map(|&r| self.saturated(r)).collect();
-        if !saturated.is_empty() && saturated.iter().all(|&s| s) {
+        let everywhere = !saturated.is_empty() && saturated.iter().all(|&s| s);
+        if let Some(level) = self.saturation_dn.filter(|_| everywhere) {
             return Err(Error::Numerical(format!(
-                "noise weights: every pixel of the frame reads the camera's saturation level ({} DN): no measurement is left to reconstruct from; shorten the exposure",
-                self.saturation_dn.unwrap_or(f64::NAN)
+                "noise weights: every pixel of the frame reads the camera's saturation level ({level} DN): no measurement is left to reconstruct from; shorten the exposure"
             )));
         }
         Ok(DataWeights {
