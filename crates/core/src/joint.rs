@@ -772,16 +772,16 @@ impl Joint {
         &self,
         frame: &Cube,
         seed: &Cube,
-        omega: Option<&DataWeights>,
+        weights: Option<&DataWeights>,
     ) -> Result<(Cube, JointStats)> {
         if self.cfg.prior == Prior::Pnp {
-            return pnp::run(self, frame, seed, omega);
+            return pnp::run(self, frame, seed, weights);
         }
         let t0 = Instant::now();
-        let mut st = self.start(frame, seed, omega)?;
+        let mut st = self.start(frame, seed, weights)?;
         let search = match self.cfg.weight_rule {
             WeightRule::Fixed => None,
-            WeightRule::Discrepancy if omega.is_none() => {
+            WeightRule::Discrepancy if weights.is_none() => {
                 return Err(Error::Numerical(
                     "joint: the discrepancy principle needs the noise weights ω of a camera noise model".into(),
                 ))
@@ -789,7 +789,7 @@ impl Joint {
             WeightRule::Discrepancy => Some(discrepancy::choose(self, &mut st)?),
         };
         let objective = self.iterate(&mut st, self.cfg.iterations)?;
-        let mut stats = self.finish(&st, objective, t0, omega.is_some())?;
+        let mut stats = self.finish(&st, objective, t0, weights.is_some())?;
         stats.discrepancy = search;
         Ok((from_pixel_major(&st.alpha, self.w, self.h, self.j), stats))
     }
@@ -1490,6 +1490,27 @@ mod tests {
         }
     }
 
+    /// The constant α field (0.9, 0.2, −0.1, 0.05) the range tests recover.
+    fn range_cube() -> Cube {
+        let mut t = Cube::zeros(32, 32, 4);
+        for (plane, v) in t.planes_mut().zip([0.9f32, 0.2, -0.1, 0.05]) {
+            plane.fill(v);
+        }
+        t
+    }
+
+    /// ‖est − t‖ / ‖t‖ in f64.
+    fn relative_error(est: &Cube, t: &Cube) -> f64 {
+        let d: f64 = est
+            .data
+            .iter()
+            .zip(&t.data)
+            .map(|(a, b)| ((a - b) as f64).powi(2))
+            .sum();
+        let n: f64 = t.data.iter().map(|&v| (v as f64).powi(2)).sum();
+        (d / n).sqrt()
+    }
+
     /// The range cube's frame clipped at 0.8 of its peak, as a camera saturates: flagged as
     /// saturated, the clipped pixels only bound the fit from below, the cube still has
     /// objective 0 and is recovered to 1e-4 (4000 iterations: with fewer pixels fitted exactly
@@ -1503,10 +1524,7 @@ mod tests {
             ..Default::default()
         };
         let j = solver(32, 0.0, cfg);
-        let mut t = Cube::zeros(32, 32, 4);
-        for (plane, v) in t.planes_mut().zip([0.9f32, 0.2, -0.1, 0.05]) {
-            plane.fill(v);
-        }
+        let t = range_cube();
         let mut y = frame_of(&j, &t);
         let top = 0.8 * y.max();
         let saturated: Vec<bool> = y.data.iter().map(|&v| v >= top).collect();
@@ -1514,16 +1532,7 @@ mod tests {
         assert!(share > 0.05, "only {share:.3} of the pixels clipped");
         y.data.iter_mut().for_each(|v| *v = v.min(top));
         let seed = flat_seed(&truth(32, 32));
-        let error = |est: &Cube| {
-            let d: f64 = est
-                .data
-                .iter()
-                .zip(&t.data)
-                .map(|(a, b)| ((a - b) as f64).powi(2))
-                .sum();
-            let n: f64 = t.data.iter().map(|&v| (v as f64).powi(2)).sum();
-            (d / n).sqrt()
-        };
+        let error = |est: &Cube| relative_error(est, &t);
         let omega = Cube::from_vec(32, 32, 1, vec![1.0; 32 * 32]).unwrap();
         let flagged = DataWeights {
             omega: omega.clone(),
@@ -1550,36 +1559,16 @@ mod tests {
             ..Default::default()
         };
         let j = solver(32, 0.0, cfg);
-        let mut t = Cube::zeros(32, 32, 4);
-        for (plane, v) in t.planes_mut().zip([0.9f32, 0.2, -0.1, 0.05]) {
-            plane.fill(v);
-        }
+        let t = range_cube();
         let y = frame_of(&j, &t);
         let seed = flat_seed(&truth(32, 32));
         let (est, stats) = j.run(&y, &seed, None).unwrap();
-        let err = est
-            .data
-            .iter()
-            .zip(&t.data)
-            .map(|(a, b)| ((a - b) as f64).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let norm = t
-            .data
-            .iter()
-            .map(|&v| (v as f64).powi(2))
-            .sum::<f64>()
-            .sqrt();
+        let rel = relative_error(&est, &t);
         eprintln!(
-            "γ {relaxation}: relative error {:.3e}, objective at the seed and the end {:?}",
-            err / norm,
+            "γ {relaxation}: relative error {rel:.3e}, objective at the seed and the end {:?}",
             stats.objective
         );
-        assert!(
-            err / norm < 1e-4,
-            "γ {relaxation}: relative error {:.3e}",
-            err / norm
-        );
+        assert!(rel < 1e-4, "γ {relaxation}: relative error {rel:.3e}");
         assert!(stats.objective.iter().all(|v| v.is_finite()));
     }
 
@@ -1727,21 +1716,11 @@ mod tests {
             ..pnp(2000)
         };
         let j = solver(32, 0.0, cfg);
-        let mut t = Cube::zeros(32, 32, 4);
-        for (plane, v) in t.planes_mut().zip([0.9f32, 0.2, -0.1, 0.05]) {
-            plane.fill(v);
-        }
+        let t = range_cube();
         let (est, stats) = j
             .run(&frame_of(&j, &t), &flat_seed(&truth(32, 32)), None)
             .unwrap();
-        let err = est
-            .data
-            .iter()
-            .zip(&t.data)
-            .map(|(a, b)| ((a - b) as f64).powi(2))
-            .sum::<f64>();
-        let norm = t.data.iter().map(|&v| (v as f64).powi(2)).sum::<f64>();
-        let rel = (err / norm).sqrt();
+        let rel = relative_error(&est, &t);
         eprintln!(
             "relative error {rel:.3e}, fixed point {:.3e} → {:.3e}",
             stats.fixed_point[0],

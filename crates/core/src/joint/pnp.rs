@@ -42,12 +42,12 @@ pub fn run(
     joint: &Joint,
     frame: &Cube,
     seed: &Cube,
-    omega: Option<&DataWeights>,
+    weights: Option<&DataWeights>,
 ) -> Result<(Cube, JointStats)> {
     let t0 = Instant::now();
     let cfg = &joint.cfg;
     let (w, h, j) = (joint.w, joint.h, joint.j);
-    let mut st = joint.start(frame, seed, omega)?;
+    let mut st = joint.start(frame, seed, weights)?;
     st.lambda = 0.0;
     let first = joint.objective(&mut st);
     let weight: f64 = joint
@@ -133,7 +133,7 @@ pub fn run(
     st.alpha
         .copy_from_slice(if projector.is_some() { &s.z2 } else { &s.z });
     let last = joint.objective(&mut st);
-    let mut stats = joint.finish(&st, vec![first, last], t0, omega.is_some())?;
+    let mut stats = joint.finish(&st, vec![first, last], t0, weights.is_some())?;
     stats.steps = [tau, 0.0];
     stats.lambda = 0.0;
     stats.fixed_point = fixed_point;
