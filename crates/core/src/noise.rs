@@ -40,6 +40,12 @@ pub struct NoiseModel {
     pub saturation_dn: Option<f64>,
 }
 
+/// Whether a raw value reads the saturation level `level_dn` once rounded to the DN: the one
+/// test of saturation, shared by the weights here and the twin's frame statistics.
+pub fn reads_saturation(raw: f32, level_dn: f64) -> bool {
+    raw as f64 >= level_dn - 0.5
+}
+
 impl NoiseModel {
     /// Both figures finite and > 0 (quantisation alone gives σ_y.dark ≥ 1/√12 DN); the error
     /// names `what` (where the model came from) and the value.
@@ -64,7 +70,7 @@ impl NoiseModel {
 
     /// Whether a raw value reads the saturation level (rounded to the DN).
     fn saturated(&self, raw: f32) -> bool {
-        self.saturation_dn.is_some_and(|s| raw as f64 >= s - 0.5)
+        self.saturation_dn.is_some_and(|s| reads_saturation(raw, s))
     }
 
     /// ω_p = 1/var(y_p) of a linearised frame y = g⊙(raw − dark), g_p the flat-field gain

@@ -12,6 +12,7 @@ use specmux_core::calibration::{Calibration, CalibrationFrames, MeasuredCarrier}
 use specmux_core::crosstalk::{self, ErrorBudget};
 use specmux_core::demux::{Demux, SUPER_GAUSSIAN_ORDER};
 use specmux_core::metrics::{self, Metrics};
+use specmux_core::noise::reads_saturation;
 use specmux_core::reconstructor::{Reconstruction, Reconstructor};
 use specmux_core::spectral::basis::BasisFit;
 use specmux_core::spectral::Library;
@@ -57,7 +58,7 @@ pub struct ChannelRow {
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameStats {
     pub pixels: usize,
-    /// Pixels at or above the camera's saturation (raw frames only).
+    /// Pixels that read the camera's saturation level, rounded to the DN (raw frames only).
     pub saturated_pixels: usize,
     pub non_finite_pixels: usize,
 }
@@ -65,10 +66,16 @@ pub struct FrameStats {
 impl FrameStats {
     /// Count on `frame`; `saturation_dn` is the raw frame's ceiling (None for a linear frame).
     pub fn of(frame: &Cube, saturation_dn: Option<f64>) -> FrameStats {
-        let top = saturation_dn.map_or(f32::INFINITY, |s| s as f32);
         FrameStats {
             pixels: frame.data.len(),
-            saturated_pixels: frame.data.iter().filter(|&&v| v >= top).count(),
+            saturated_pixels: match saturation_dn {
+                Some(s) => frame
+                    .data
+                    .iter()
+                    .filter(|&&v| reads_saturation(v, s))
+                    .count(),
+                None => 0,
+            },
             non_finite_pixels: frame.data.iter().filter(|v| !v.is_finite()).count(),
         }
     }
@@ -527,4 +534,27 @@ fn joint_noise_line(j: &specmux_core::joint::JointStats) -> String {
         s += &format!("; ADMM fixed-point residual {first:.3e} → {last:.3e}");
     }
     s + "\n"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use specmux_core::noise::NoiseModel;
+
+    /// The frame statistics count the pixels the noise weights flag: level 3882 DN, raw (3882,
+    /// 3881.6, 3881.4, 4095) → the first, second (rounds to 3882) and last read it.
+    #[test]
+    fn the_saturated_count_agrees_with_the_noise_weights() {
+        let raw = Cube::from_vec(4, 1, 1, vec![3882.0, 3881.6, 3881.4, 4095.0]).unwrap();
+        let model = NoiseModel {
+            gain_dn_per_e: 0.5,
+            dark_noise_dn: 2.0,
+            saturation_dn: Some(3882.0),
+        };
+        let flagged = model.weights(&raw, &raw, None).unwrap().saturated;
+        let stats = FrameStats::of(&raw, model.saturation_dn);
+        assert_eq!(stats.saturated_pixels, 3);
+        assert_eq!(flagged.iter().filter(|&&s| s).count(), 3);
+        assert_eq!(FrameStats::of(&raw, None).saturated_pixels, 0);
+    }
 }
