@@ -512,6 +512,12 @@ fn joint_noise_line(j: &specmux_core::joint::JointStats) -> String {
         "joint prior {}: {weights} = {:.3}",
         j.prior, j.residual_ratio
     );
+    if j.reweight_rounds > 0 {
+        s += &format!(
+            "; TV weights refreshed {} times (reweighted TV)",
+            j.reweight_rounds
+        );
+    }
     if j.saturated_pixels > 0 {
         s += &format!(
             "; {} saturated pixels fitted one-sided (aᵀα ≥ y costs nothing)",

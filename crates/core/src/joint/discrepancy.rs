@@ -33,7 +33,7 @@ pub fn choose(j: &Joint, st: &mut JointState) -> Result<Search> {
     let lambda0 = st.lambda as f64;
     let search = secant(lambda0, |lambda| {
         j.set_lambda(st, lambda)?;
-        j.iterate(st, j.cfg.search_iterations)?;
+        j.iterate(st, j.cfg.search_iterations, 0)?;
         let (sum, n) = j.weighted_residual(st);
         if n == 0 {
             return Err(Error::Numerical(
