@@ -260,10 +260,18 @@ pub struct Choice {
     pub measured_on: String,
 }
 
-/// True for the bench rows the tables hold: crop 0.25, square window, TV prior, no noise
-/// weights (`specmux bench` and `[reconstruct] auto_table` select them alike).
-pub fn tabled(crop: f64, window: WindowShape, prior: Prior, noise_weighted: bool) -> bool {
-    crop == 0.25 && window == WindowShape::Square && prior == Prior::Tv && !noise_weighted
+/// True for the bench rows the tables hold: crop 0.25, square window, plain TV prior (not
+/// reweighted), no noise weights (`specmux bench` and `[reconstruct] auto_table` select them
+/// alike).
+pub fn tabled(
+    crop: f64,
+    window: WindowShape,
+    prior: Prior,
+    noise_weighted: bool,
+    reweight_rounds: usize,
+) -> bool {
+    let plain_tv = prior == Prior::Tv && reweight_rounds == 0;
+    crop == 0.25 && window == WindowShape::Square && plain_tv && !noise_weighted
 }
 
 /// A time measured on a frame of `pixels`, scaled to the tables' 768² frame.

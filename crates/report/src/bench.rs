@@ -71,6 +71,9 @@ pub struct Setting {
     pub prior: Prior,
     /// The joint method's use of the camera's noise model; off for the other methods.
     pub noise: NoiseAware,
+    /// Reweighted TV: times the joint method's TV weights are refreshed (0: plain TV; 0 for
+    /// the other methods). `auto` never picks these rows (docs/joint.md, "Reweighted TV").
+    pub reweight_rounds: usize,
 }
 
 /// How the joint method uses the camera's noise model (`[reconstruct.joint]`): the bench's
@@ -95,6 +98,9 @@ impl Setting {
             Method::Gap => format!("gap {} it", self.iterations),
             Method::GapTv => format!("gap-tv {} it", self.iterations),
             Method::Joint if self.prior == Prior::Pnp => format!("pnp {} it", self.iterations),
+            Method::Joint if self.reweight_rounds > 0 => {
+                format!("joint {} it reweighted", self.iterations)
+            }
             Method::Joint => match self.noise {
                 NoiseAware::Off => format!("joint {} it", self.iterations),
                 NoiseAware::Weighted => format!("joint {} it noise-weighted", self.iterations),
@@ -114,7 +120,7 @@ impl Setting {
 /// The default grid: Fourier at three crops × three window shapes, GAP and GAP-TV at
 /// 1, 2, 5, 10, 20, 50 iterations (crop 0.25, square), both at 20 iterations with the other
 /// two windows, and the joint reconstruction with its TV prior at 10, 15, 20, 30, 40, 80
-/// iterations and its plug-and-play prior at 10, 20, 40, 80.
+/// iterations, its plug-and-play prior at 10, 20, 40, 80 and reweighted TV at 20, 40, 80.
 pub fn default_grid() -> Vec<Setting> {
     let shapes = [
         WindowShape::Square,
@@ -131,6 +137,7 @@ pub fn default_grid() -> Vec<Setting> {
                 window,
                 prior: Prior::Tv,
                 noise: NoiseAware::Off,
+                reweight_rounds: 0,
             });
         }
     }
@@ -143,6 +150,7 @@ pub fn default_grid() -> Vec<Setting> {
                 window: WindowShape::Square,
                 prior: Prior::Tv,
                 noise: NoiseAware::Off,
+                reweight_rounds: 0,
             });
         }
         for window in &shapes[1..] {
@@ -153,6 +161,7 @@ pub fn default_grid() -> Vec<Setting> {
                 window: *window,
                 prior: Prior::Tv,
                 noise: NoiseAware::Off,
+                reweight_rounds: 0,
             });
         }
     }
@@ -165,8 +174,18 @@ pub fn default_grid() -> Vec<Setting> {
             g.push(joint_setting(iterations, prior, NoiseAware::Off));
         }
     }
+    for iterations in [20, 40, 80] {
+        g.push(Setting {
+            reweight_rounds: REWEIGHT_ROUNDS,
+            ..joint_setting(iterations, Prior::Tv, NoiseAware::Off)
+        });
+    }
     g
 }
+
+/// The bench's reweighted TV rows refresh the weights this often (`reweight_rounds`, the
+/// count docs/joint.md measured at 40 iterations).
+pub const REWEIGHT_ROUNDS: usize = 3;
 
 /// Joint TV iteration counts a hardware GPU adds to the grid: at well under 1 ms an iteration
 /// (docs/gpu.md) its `auto` table reaches past the CPU's 80.
@@ -201,6 +220,7 @@ fn joint_setting(iterations: usize, prior: Prior, noise: NoiseAware) -> Setting 
         window: WindowShape::Square,
         prior,
         noise,
+        reweight_rounds: 0,
     }
 }
 
@@ -442,6 +462,7 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
         Method::Joint => {
             exp.reconstruct.joint.iterations = s.iterations;
             exp.reconstruct.joint.prior = s.prior;
+            exp.reconstruct.joint.reweight_rounds = s.reweight_rounds;
             exp.reconstruct.joint.noise_weights = s.noise != NoiseAware::Off;
             if s.noise == NoiseAware::Discrepancy {
                 exp.reconstruct.joint.weight_rule = WeightRule::Discrepancy;
@@ -588,7 +609,8 @@ pub fn work_precision_plot(
         .iter()
         .filter(|r| {
             let s = &r.setting;
-            auto::tabled(s.crop, s.window, s.prior, s.noise != NoiseAware::Off)
+            let noise_weighted = s.noise != NoiseAware::Off;
+            auto::tabled(s.crop, s.window, s.prior, noise_weighted, s.reweight_rounds)
         })
         .map(|r| auto::Entry {
             method: r.setting.method,
@@ -622,16 +644,32 @@ pub fn work_precision_plot(
             .draw()
             .map_err(|x| e(&x))?;
         let (tv, pnp, off) = (Prior::Tv, Prior::Pnp, NoiseAware::Off);
-        for (c, method, prior, noise, name) in [
-            (0, Method::Fourier, tv, off, "fourier (crops, windows)"),
-            (1, Method::Gap, tv, off, "gap"),
-            (2, Method::GapTv, tv, off, "gap-tv"),
-            (3, Method::Joint, tv, off, "joint (PDHG, vectorial TV)"),
+        // (colour, method, prior, noise, reweighted, legend)
+        for (c, method, prior, noise, reweighted, name) in [
+            (
+                0,
+                Method::Fourier,
+                tv,
+                off,
+                false,
+                "fourier (crops, windows)",
+            ),
+            (1, Method::Gap, tv, off, false, "gap"),
+            (2, Method::GapTv, tv, off, false, "gap-tv"),
+            (
+                3,
+                Method::Joint,
+                tv,
+                off,
+                false,
+                "joint (PDHG, vectorial TV)",
+            ),
             (
                 4,
                 Method::Joint,
                 pnp,
                 off,
+                false,
                 "joint plug-and-play (ADMM, guided smoother)",
             ),
             (
@@ -639,6 +677,7 @@ pub fn work_precision_plot(
                 Method::Joint,
                 tv,
                 NoiseAware::Weighted,
+                false,
                 "joint, noise-weighted",
             ),
             (
@@ -646,7 +685,16 @@ pub fn work_precision_plot(
                 Method::Joint,
                 tv,
                 NoiseAware::Discrepancy,
+                false,
                 "joint, noise-weighted, discrepancy λ",
+            ),
+            (
+                7,
+                Method::Joint,
+                tv,
+                off,
+                true,
+                "joint, reweighted TV (flat-patch scenes; auto skips it)",
             ),
         ] {
             let color = Palette99::pick(c).to_rgba();
@@ -654,7 +702,8 @@ pub fn work_precision_plot(
                 .iter()
                 .filter(|r| {
                     let s = &r.setting;
-                    (s.method, s.prior, s.noise) == (method, prior, noise)
+                    let series = (method, prior, noise, reweighted);
+                    (s.method, s.prior, s.noise, s.reweight_rounds > 0) == series
                 })
                 .collect();
             if of_method.is_empty() {
@@ -1152,6 +1201,7 @@ mod tests {
                 window: WindowShape::Circular,
                 prior: Prior::Tv,
                 noise: NoiseAware::Off,
+                reweight_rounds: 0,
             },
             Setting {
                 method: Method::Gap,
@@ -1160,12 +1210,17 @@ mod tests {
                 window: WindowShape::Square,
                 prior: Prior::Tv,
                 noise: NoiseAware::Off,
+                reweight_rounds: 0,
             },
             joint,
             joint_setting(30, Prior::Pnp, NoiseAware::Off),
+            Setting {
+                reweight_rounds: REWEIGHT_ROUNDS,
+                ..joint
+            },
         ];
         let rows = work_precision(&sim, &grid, 2).unwrap();
-        assert_eq!(rows.len(), 4);
+        assert_eq!(rows.len(), 5);
         // The joint method beats the Fourier estimate it starts from, through the Reconstructor.
         assert!(rows[2].psnr_db > rows[0].psnr_db + 1.0, "{rows:?}");
         for r in &rows {
@@ -1197,6 +1252,18 @@ mod tests {
             table.contains("| pnp 30 it, crop 0.25 square | cpu |"),
             "{table}"
         );
+        // Reweighted TV runs as its own row (a different cube than plain TV's), which `auto`
+        // does not take into its table.
+        assert!(table.contains("| joint 30 it reweighted, crop 0.25 square | cpu |"));
+        assert_ne!(rows[4].psnr_db, rows[2].psnr_db, "{rows:?}");
+        let s = &grid[4];
+        assert!(!auto::tabled(
+            s.crop,
+            s.window,
+            s.prior,
+            false,
+            s.reweight_rounds
+        ));
     }
 
     #[cfg(not(feature = "gpu"))]
@@ -1241,6 +1308,7 @@ mod tests {
             window: WindowShape::Square,
             prior: Prior::Tv,
             noise: NoiseAware::Off,
+            reweight_rounds: 0,
         };
         let grid = [
             setting(Method::Fourier, 0),

@@ -34,6 +34,9 @@ struct Setting {
     window: WindowShape,
     prior: Prior,
     noise: String,
+    /// Absent in reports written before the bench had reweighted TV rows.
+    #[serde(default)]
+    reweight_rounds: usize,
 }
 
 /// The entries of the bench report at `path` (`value` as the experiment `file` wrote it); every
@@ -51,7 +54,13 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
     let mut entries = Vec::new();
     for (i, r) in report.rows.iter().enumerate() {
         let s = &r.setting;
-        if !tabled(s.crop, s.window, s.prior, s.noise != "off") {
+        if !tabled(
+            s.crop,
+            s.window,
+            s.prior,
+            s.noise != "off",
+            s.reweight_rounds,
+        ) {
             continue;
         }
         let Some([w, h]) = r.frame.filter(|[w, h]| w * h > 0) else {
