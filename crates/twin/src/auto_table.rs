@@ -97,7 +97,8 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
 mod tests {
     use super::*;
 
-    /// A bench report of two usable rows at 384² and one plug-and-play row (left out).
+    /// A bench report of two usable rows at 384², one plug-and-play row and one reweighted TV
+    /// row (both left out; the rows without `reweight_rounds` are plain, as in older reports).
     const REPORT: &str = r#"{"schema_version": 1, "rows": [
         {"label": "gap 20 it", "setting": {"method": "gap", "iterations": 20, "crop": 0.25,
          "window": "square", "prior": "tv", "noise": "off"}, "psnr_db": 17.2, "seconds": 0.1,
@@ -107,7 +108,10 @@ mod tests {
          "frame": [384, 384]},
         {"label": "pnp 80 it", "setting": {"method": "joint", "iterations": 80, "crop": 0.25,
          "window": "square", "prior": "pnp", "noise": "off"}, "psnr_db": 23.7, "seconds": 2.0,
-         "frame": [384, 384]}
+         "frame": [384, 384]},
+        {"label": "joint 40 it reweighted", "setting": {"method": "joint", "iterations": 40,
+         "crop": 0.25, "window": "square", "prior": "tv", "noise": "off", "reweight_rounds": 3},
+         "psnr_db": 24.9, "seconds": 0.5, "frame": [384, 384]}
     ]}"#;
 
     fn write(name: &str, text: &str) -> std::path::PathBuf {
