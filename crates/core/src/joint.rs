@@ -860,8 +860,10 @@ impl Joint {
         Ok(objective)
     }
 
-    /// The TV weights from the current α: w_p = ε/(‖∇α(p)‖ + ε), ε = `reweight_eps` × the mean
-    /// ‖∇α(p)‖; the dual q projected into the new balls, the extrapolation restarted.
+    /// The TV weights from the current α: w_p = ε/(e_p + ε), e_p the excess of ‖∇α(p)‖ over
+    /// its 3 × 3 mean (a jump is a thin ridge of the gradient, shading a broad plateau: only
+    /// jumps lose weight), ε = `reweight_eps` × the mean ‖∇α(p)‖; the dual q projected into
+    /// the new balls, the extrapolation restarted.
     fn reweight(&self, st: &mut JointState) {
         let (w, h, j) = (self.w, self.h, self.j);
         let alpha = &st.alpha;
@@ -877,6 +879,7 @@ impl Joint {
         );
         let mean = st.tvw.iter().map(|&v| v as f64).sum::<f64>() / st.tvw.len() as f64;
         let eps = (self.cfg.reweight_eps * mean) as f32;
+        st.tvw = ridge_excess(&st.tvw, w, h);
         let lambda = st.lambda;
         st.tvw
             .par_iter_mut()
@@ -1246,6 +1249,24 @@ fn prox_pixel<const J: usize>(
     out
 }
 
+/// max(g_p − mean of g over the 3 × 3 neighbourhood of p, 0) for a w × h image g (the
+/// neighbourhood clipped at the borders): what stands out of its surroundings.
+fn ridge_excess(g: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; w * h];
+    out.par_chunks_mut(w).enumerate().for_each(|(yy, row)| {
+        let rows = yy.saturating_sub(1)..(yy + 2).min(h);
+        for (xx, e) in row.iter_mut().enumerate() {
+            let cols = xx.saturating_sub(1)..(xx + 2).min(w);
+            let sum: f32 = (rows.clone())
+                .map(|y| g[y * w + cols.start..y * w + cols.end].iter().sum::<f32>())
+                .sum();
+            let mean = sum / (rows.len() * cols.len()) as f32;
+            *e = (g[yy * w + xx] - mean).max(0.0);
+        }
+    });
+    out
+}
+
 /// Forward differences of row `yy` of a pixel-major field (J per pixel), zero across the last
 /// column and row (Neumann boundaries, as in `tv.rs`).
 fn row_gradients(
@@ -1507,9 +1528,10 @@ mod tests {
     }
 
     /// Reweighting by hand: on 8 × 8, α₀ = 1 left of x = 4 and 3 from there (other coefficients
-    /// 0): ‖∇α‖ is 2 at x = 3 and 0 elsewhere, mean 2·8/64 = 0.25 = ε (`reweight_eps` 1), so
-    /// w = 0.25/2.25 = 1/9 at x = 3 and 1 elsewhere; a large dual is projected into the new
-    /// balls λw_p and the extrapolation restarts (ᾱ = α).
+    /// 0): ‖∇α‖ is 2 at x = 3 and 0 elsewhere, mean 2·8/64 = 0.25 = ε (`reweight_eps` 1); the
+    /// 3 × 3 mean on that column is 2/3 (borders too), so the excess is 4/3 and
+    /// w = 0.25/(4/3 + 0.25) = 3/19 at x = 3, 1 elsewhere (no excess beside the ridge); a large
+    /// dual is projected into the new balls λw_p and the extrapolation restarts (ᾱ = α).
     #[test]
     fn reweighting_follows_the_gradient_by_hand() {
         let cfg = JointConfig {
@@ -1527,7 +1549,7 @@ mod tests {
         st.bar.fill(7.0);
         j.reweight(&mut st);
         for (p, &w) in st.tvw.iter().enumerate() {
-            let expected = if p % 8 == 3 { 1.0 / 9.0 } else { 1.0 };
+            let expected = if p % 8 == 3 { 3.0 / 19.0 } else { 1.0 };
             assert!((w - expected).abs() < 1e-6, "pixel {p}: {w}");
             let q2: f32 = (st.qx[p * 4..p * 4 + 4].iter())
                 .chain(&st.qy[p * 4..p * 4 + 4])
@@ -1536,6 +1558,22 @@ mod tests {
             assert!(q2.sqrt() <= st.lambda * w * (1.0 + 1e-5), "pixel {p}");
         }
         assert_eq!(st.bar, st.alpha);
+    }
+
+    /// A plateau of the gradient (shading) stands out nowhere; a one-pixel ridge by 2/3 of its
+    /// height (the 3 × 3 mean holds three of its nine values), at the borders too.
+    #[test]
+    fn only_ridges_of_the_gradient_stand_out() {
+        assert!(ridge_excess(&[0.1; 25], 5, 5)
+            .iter()
+            .all(|&e| e.abs() < 1e-7));
+        let line: Vec<f32> = (0..25)
+            .map(|p| if p / 5 == 2 { 3.0 } else { 0.0 })
+            .collect();
+        for (p, e) in ridge_excess(&line, 5, 5).into_iter().enumerate() {
+            let expected = if p / 5 == 2 { 2.0 } else { 0.0 };
+            assert!((e - expected).abs() < 1e-6, "pixel {p}: {e}");
+        }
     }
 
     /// Plain TV shrinks the jumps of a piecewise-constant field, which one measurement per
