@@ -844,10 +844,9 @@ impl Joint {
         if !self.cfg.trace_objective {
             objective.push(self.objective(st));
         }
-        let rounds = reweights + 1;
         for it in 0..iterations {
             crate::interrupt::check("the joint reconstruction")?;
-            if it > 0 && it * rounds / iterations > (it - 1) * rounds / iterations {
+            if reweights_before(it, iterations, reweights) {
                 self.reweight(st);
             }
             if self.cfg.trace_objective {
@@ -1247,6 +1246,13 @@ fn prox_pixel<const J: usize>(
         *o += coef * m;
     }
     out
+}
+
+/// Whether the TV weights are refreshed before iteration `it` of `iterations` split into
+/// `reweights` + 1 equal stages (the CPU's and the GPU's stage boundaries alike).
+pub fn reweights_before(it: usize, iterations: usize, reweights: usize) -> bool {
+    let stage = |i: usize| i * (reweights + 1) / iterations;
+    it > 0 && stage(it) > stage(it - 1)
 }
 
 /// max(g_p − mean of g over the 3 × 3 neighbourhood of p, 0) for a w × h image g (the

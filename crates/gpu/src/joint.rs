@@ -10,7 +10,7 @@ use crate::context::{linear_groups, GpuContext, Launch};
 use crate::error::{GpuError, Result};
 use crate::gap;
 use crate::mix::GpuMix;
-use specmux_core::joint::{Joint, JointStats};
+use specmux_core::joint::{reweights_before, Joint, JointStats};
 use specmux_core::Cube;
 
 /// Threads per workgroup of shaders/joint.wgsl.
@@ -33,6 +33,9 @@ struct Params {
     step: f32,
     /// γ − 1 of the over-relaxation (0: the plain Chambolle–Pock step).
     over: f32,
+    /// Reweighted TV: ε per mean ‖∇α‖ (`reweight_eps`).
+    eps: f32,
+    _pad: [u32; 3],
 }
 
 /// The iterate and dual variables read back, plane-major (value k of pixel p at k·npx + p).
@@ -57,6 +60,8 @@ pub struct GpuJoint {
     trace: bool,
     /// Over-relaxation γ (reported in the stats).
     relaxation: f64,
+    /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
+    reweights: usize,
     j: usize,
     nbp: usize,
     npx: usize,
@@ -66,6 +71,8 @@ pub struct GpuJoint {
     /// Σ of the pixel costs appended to the objective list.
     cost_sum: [Launch; 2],
     primal: Launch,
+    /// ‖∇α‖ per pixel, its mean appended to the reweighting's list, the new TV weights.
+    reweight: Vec<Launch>,
     /// The pixel costs at the current α (the objective after the last step).
     cost: Launch,
     non_finite: Launch,
@@ -138,11 +145,31 @@ impl GpuJoint {
             .collect();
         start.push(launch("setup", &[(1, &b.rig), (3, &b.scalars)], [1, 1, 1]));
         start.push(launch("tables", &joined(&common, &[(6, &b.r)]), pixels));
+        let mut reweight = vec![launch("grad_norm", &[(5, &b.state), (7, &b.cost)], pixels)];
+        let scale = 1.0 / npx as f64;
+        reweight.extend(gap::abs_sum(
+            ctx,
+            &gm,
+            &b.cost,
+            (npx, 1),
+            scale,
+            &b.partials,
+            &b.rw,
+        ));
+        let weights = [
+            (3, &b.scalars),
+            (4, &b.tab),
+            (5, &b.state),
+            (7, &b.cost),
+            (10, &b.rw),
+        ];
+        reweight.push(launch("reweight", &weights, pixels));
         let ones = vec![1.0; t.system.nrows()];
         let joint = GpuJoint {
             iterations: t.config.iterations,
             trace: t.config.trace_objective,
             relaxation: t.config.relaxation,
+            reweights: t.config.reweight_rounds,
             j,
             nbp: t.padded_bands,
             npx,
@@ -160,6 +187,7 @@ impl GpuJoint {
                 ],
                 pixels,
             ),
+            reweight,
             cost: launch("objective", &joined(&common, &[(7, &b.cost)]), pixels),
             non_finite: gap::non_finite(ctx, &gm, &b.state, (npx, j), &b.counter),
             cube: GpuMix::into(ctx, &scaled_rows(t.basis, gains), &b.state, npx, cube)?,
@@ -220,10 +248,20 @@ impl GpuJoint {
         self.channels.output()
     }
 
-    /// Record a whole run from the seed: start, `iterations` steps, `encode_finish`.
+    /// Record a whole run from the seed: start, `iterations` steps (the TV weights refreshed
+    /// between the stages of reweighted TV, as on the CPU), `encode_finish`.
     pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
         self.encode_start(enc);
-        self.encode_steps(enc, self.iterations);
+        {
+            let mut cp = enc.begin_compute_pass(&Default::default());
+            for it in 0..self.iterations {
+                if reweights_before(it, self.iterations, self.reweights) {
+                    self.reweight.iter().for_each(|l| l.record(&mut cp));
+                }
+                self.record_dual(&mut cp);
+                self.primal.record(&mut cp);
+            }
+        }
         self.encode_finish(enc);
     }
 
@@ -235,6 +273,7 @@ impl GpuJoint {
             &self.b.objective,
             &self.b.extremes,
             &self.b.counter,
+            &self.b.rw,
         ] {
             enc.clear_buffer(b, 0, None);
         }
@@ -243,16 +282,6 @@ impl GpuJoint {
         if !self.trace {
             self.cost.record(&mut cp);
             self.cost_sum.iter().for_each(|l| l.record(&mut cp));
-        }
-    }
-
-    /// Record `steps` iterations (at most `iterations` in all per start: the objective list
-    /// has room for that many): the dual step and its objective, then the primal step.
-    pub fn encode_steps(&self, enc: &mut wgpu::CommandEncoder, steps: usize) {
-        let mut cp = enc.begin_compute_pass(&Default::default());
-        for _ in 0..steps {
-            self.record_dual(&mut cp);
-            self.primal.record(&mut cp);
         }
     }
 
@@ -351,7 +380,7 @@ impl GpuJoint {
 /// The buffers of one rig's run: shaders/joint.wgsl's bindings and the sums' partials.
 struct Buffers {
     rig: wgpu::Buffer,
-    /// m | t | c | k | ω.
+    /// m | t | c | k | ω | the TV weight.
     tab: wgpu::Buffer,
     /// α | ᾱ | qx | qy.
     state: wgpu::Buffer,
@@ -363,6 +392,8 @@ struct Buffers {
     extremes: wgpu::Buffer,
     counter: wgpu::Buffer,
     partials: wgpu::Buffer,
+    /// The reweighting's means of ‖∇α‖: a count, then one value per refresh.
+    rw: wgpu::Buffer,
 }
 
 impl Buffers {
@@ -374,7 +405,7 @@ impl Buffers {
         let groups = gap::count(linear_groups(npx * t.basis_len, WORKGROUP));
         Buffers {
             rig: ctx.storage_init("joint rig tables", &rig_tables(joint)),
-            tab: ctx.storage("joint prox tables", (j + 4) * plane),
+            tab: ctx.storage("joint prox tables", (j + 5) * plane),
             state: ctx.storage("joint state", 4 * j * plane),
             r: ctx.storage("joint constraint dual", (t.padded_bands as u64 + 1) * plane),
             cost: ctx.storage("joint pixel costs", plane),
@@ -383,6 +414,10 @@ impl Buffers {
             extremes: ctx.storage("joint cube extremes", 8),
             counter: ctx.storage("joint non-finite", 4),
             partials: ctx.storage("joint partials", 4 * groups as u64),
+            rw: ctx.storage(
+                "joint reweight means",
+                4 * (t.config.reweight_rounds as u64 + 2),
+            ),
         }
     }
 }
@@ -399,6 +434,8 @@ fn params(joint: &Joint) -> Params {
         ratio: t.config.step_ratio as f32,
         step: (t.step_product.sqrt() / t.operator_norm) as f32,
         over: (t.config.relaxation - 1.0) as f32,
+        eps: t.config.reweight_eps as f32,
+        _pad: [0; 3],
     }
 }
 

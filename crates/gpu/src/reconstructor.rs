@@ -212,22 +212,17 @@ impl GpuReconstructor {
     }
 }
 
-/// The GPU runs the joint method's TV prior with a fixed λ, uniform TV weights and ω = 1; the
-/// plug-and-play prior, the discrepancy rule, noise weights and reweighted TV are CPU-only and
-/// refused here with the key to change.
+/// The GPU runs the joint method's TV prior (plain or reweighted) with a fixed λ and ω = 1;
+/// the plug-and-play prior, the discrepancy rule and noise weights are CPU-only and refused
+/// here with the key to change.
 fn gpu_joint_supported(j: &Joint, recon: &Reconstructor) -> Result<()> {
     let cfg = j.tables().config;
     let unsupported = if cfg.prior != Prior::Tv {
-        Some("reconstruct.joint.prior = \"pnp\"".to_string())
+        Some("reconstruct.joint.prior = \"pnp\"")
     } else if cfg.weight_rule != WeightRule::Fixed {
-        Some("reconstruct.joint.weight_rule = \"discrepancy\"".to_string())
+        Some("reconstruct.joint.weight_rule = \"discrepancy\"")
     } else if recon.joint_noise().is_some() {
-        Some("reconstruct.joint.noise_weights = true".to_string())
-    } else if cfg.reweight_rounds > 0 {
-        Some(format!(
-            "reconstruct.joint.reweight_rounds = {}",
-            cfg.reweight_rounds
-        ))
+        Some("reconstruct.joint.noise_weights = true")
     } else {
         None
     };

@@ -147,10 +147,6 @@ fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
             "noise_weights = true\nweight_rule = \"discrepancy\"\n",
             "reconstruct.joint.weight_rule",
         ),
-        (
-            "reweight_rounds = 1\n",
-            "reconstruct.joint.reweight_rounds = 1",
-        ),
     ] {
         let toml = format!(
             "[scene]\nsize = [32, 32]\n[rig.sensor]\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 2\n{keys}"

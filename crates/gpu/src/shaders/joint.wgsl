@@ -16,6 +16,11 @@ struct Params {
     ratio: f32,
     step: f32,
     over: f32,
+    // Reweighted TV: ε per mean ‖∇α‖ (`reweight_eps`).
+    eps: f32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 // Basis vectors and bands padded to lanes (specmux-gpu writes the rig's values here).
@@ -27,7 +32,8 @@ const LANES: u32 = 8u;
 // η'Q (J × J, row-major) | its eigenvectors (J × J, column i the i-th) | eigenvalues (J).
 // `sc`, per frame: [count, mean|y|, mean|α₀|] (a list the sums append to), λ, τ, σ, –, –,
 // then M = (I + τη'Q)⁻¹ (J × J, column-major as on the CPU).
-// `tab`, per frame: m = M a (J planes) | t = τωy | c = τω/(1 + τω aᵀm) | k = aᵀm | ω.
+// `tab`, per frame: m = M a (J planes) | t = τωy | c = τω/(1 + τω aᵀm) | k = aᵀm | ω | the TV
+// weight w (1 unless reweighted).
 // `st`: α | ᾱ | qx | qy (J planes each). `r`: the constraint dual (NBP planes), then the
 // active flag (1 where r ≠ 0 somewhere in the pixel's bands).
 @group(0) @binding(0) var<uniform> prm: Params;
@@ -40,6 +46,8 @@ const LANES: u32 = 8u;
 @group(0) @binding(7) var<storage, read_write> cost: array<f32>;
 @group(0) @binding(8) var<storage, read_write> cube: array<f32>;
 @group(0) @binding(9) var<storage, read_write> extremes: array<atomic<u32>, 2>;
+// The reweighting's list of mean ‖∇α‖ (a count, then the values the sums append).
+@group(0) @binding(10) var<storage, read> rw: array<f32>;
 
 const SC_LAMBDA: u32 = 3u;
 const SC_TAU: u32 = 4u;
@@ -49,6 +57,8 @@ const ALPHA: u32 = 0u;
 const BAR: u32 = J;
 const QX: u32 = 2u * J;
 const QY: u32 = 3u * J;
+// The TV weight's plane in `tab`.
+const TVW: u32 = J + 4u;
 
 fn at(plane: u32, p: u32) -> u32 {
     return plane * prm.npx + p;
@@ -142,6 +152,7 @@ fn tables(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     tab[at(J, p)] = tw * y[p];
     tab[at(J + 1u, p)] = tw / (1.0 + tw * k);
     tab[at(J + 2u, p)] = k;
+    tab[at(TVW, p)] = 1.0;
     for (var b = 0u; b <= NBP; b++) {
         r[at(b, p)] = 0.0;
     }
@@ -174,20 +185,33 @@ fn pixel_cost(p: u32, x: u32, row: u32) -> f32 {
             quad += alpha[i] * eq(i, c) * alpha[c];
         }
     }
-    var g: array<vec2<f32>, J>;
-    for (var j = 0u; j < J; j++) {
-        g[j] = gradient(ALPHA + j, p, x, row);
-    }
-    // Σ gx² then Σ gy² in one running sum, as the CPU's chained iterator.
-    var g2 = 0.0;
-    for (var j = 0u; j < J; j++) {
-        g2 += g[j].x * g[j].x;
-    }
-    for (var j = 0u; j < J; j++) {
-        g2 += g[j].y * g[j].y;
-    }
     let e = y[p] - fit;
-    return 0.5 * tab[at(J + 3u, p)] * e * e + 0.5 * quad + sc[SC_LAMBDA] * sqrt(g2);
+    let tv = sc[SC_LAMBDA] * tab[at(TVW, p)] * sqrt(alpha_grad_sq(p, x, row));
+    return 0.5 * tab[at(J + 3u, p)] * e * e + 0.5 * quad + tv;
+}
+
+// Σ_j a_j² then Σ_j b_j² in one running sum, as the CPU's chained iterators.
+fn sum_sq(a: array<f32, J>, b: array<f32, J>) -> f32 {
+    var s = 0.0;
+    for (var j = 0u; j < J; j++) {
+        s += a[j] * a[j];
+    }
+    for (var j = 0u; j < J; j++) {
+        s += b[j] * b[j];
+    }
+    return s;
+}
+
+// ‖∇α(p)‖² over the J coefficients and both directions.
+fn alpha_grad_sq(p: u32, x: u32, row: u32) -> f32 {
+    var gx: array<f32, J>;
+    var gy: array<f32, J>;
+    for (var j = 0u; j < J; j++) {
+        let g = gradient(ALPHA + j, p, x, row);
+        gx[j] = g.x;
+        gy[j] = g.y;
+    }
+    return sum_sq(gx, gy);
 }
 
 // ---- cost (per pixel): the objective's share of each pixel at the current α.
@@ -225,7 +249,7 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let x = p % prm.w;
     let row = p / prm.w;
     cost[p] = pixel_cost(p, x, row);
-    let lambda = sc[SC_LAMBDA];
+    let lambda = sc[SC_LAMBDA] * tab[at(TVW, p)];
     let sigma = sc[SC_SIGMA];
     var qx: array<f32, J>;
     var qy: array<f32, J>;
@@ -240,13 +264,7 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         qy[j] = qy0[j] + sigma * g.y;
         bar[j] = st[at(BAR + j, p)];
     }
-    var n2 = 0.0;
-    for (var j = 0u; j < J; j++) {
-        n2 += qx[j] * qx[j];
-    }
-    for (var j = 0u; j < J; j++) {
-        n2 += qy[j] * qy[j];
-    }
+    let n2 = sum_sq(qx, qy);
     var f = 1.0;
     if n2 > lambda * lambda {
         f = 0.0;
@@ -279,6 +297,68 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         }
     }
     r[at(NBP, p)] = flag;
+}
+
+// ---- grad_norm (per pixel): g_p = ‖∇α(p)‖ into `cost`, the reweighting's input (its mean
+// is appended to `rw` after this).
+@compute @workgroup_size(256)
+fn grad_norm(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    cost[p] = sqrt(alpha_grad_sq(p, p % prm.w, p / prm.w));
+}
+
+// ---- reweight (per pixel, after grad_norm and its mean): the excess e of g over its 3 × 3
+// mean (clipped at the borders), w = ε/(e + ε) with ε = eps · mean g (1 when ε = 0), q projected
+// into the ball λw, ᾱ = α (the CPU's `reweight`).
+@compute @workgroup_size(256)
+fn reweight(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    let x = p % prm.w;
+    let row = p / prm.w;
+    let y0 = select(row - 1u, 0u, row == 0u);
+    let y1 = min(row + 2u, prm.h);
+    let x0 = select(x - 1u, 0u, x == 0u);
+    let x1 = min(x + 2u, prm.w);
+    // Row sums, then their sum, as the CPU's iterators.
+    var sum = 0.0;
+    for (var yy = y0; yy < y1; yy++) {
+        var rs = 0.0;
+        for (var xx = x0; xx < x1; xx++) {
+            rs += cost[yy * prm.w + xx];
+        }
+        sum += rs;
+    }
+    let mean = sum / f32((y1 - y0) * (x1 - x0));
+    let e = max(cost[p] - mean, 0.0);
+    let eps = prm.eps * rw[bitcast<u32>(rw[0])];
+    var w = 1.0;
+    if eps > 0.0 {
+        w = eps / (e + eps);
+    }
+    tab[at(TVW, p)] = w;
+    var qx: array<f32, J>;
+    var qy: array<f32, J>;
+    for (var j = 0u; j < J; j++) {
+        qx[j] = st[at(QX + j, p)];
+        qy[j] = st[at(QY + j, p)];
+    }
+    let n2 = sum_sq(qx, qy);
+    let cap = sc[SC_LAMBDA] * w;
+    var f = 1.0;
+    if n2 > cap * cap {
+        f = cap / sqrt(n2);
+    }
+    for (var j = 0u; j < J; j++) {
+        st[at(QX + j, p)] = qx[j] * f;
+        st[at(QY + j, p)] = qy[j] * f;
+        st[at(BAR + j, p)] = st[at(ALPHA + j, p)];
+    }
 }
 
 // (βBᵀr)_j at pixel p in LANES partial sums, added up in lane order (the CPU's
