@@ -81,8 +81,9 @@ pub struct JointConfig {
     pub pnp_nonnegative: bool,
     /// Reweighted TV (Candès, Wakin & Boyd 2008): the iterations run in `reweight_rounds` + 1
     /// equal stages, and after each stage but the last the TV weight of pixel p becomes
-    /// ε/(‖∇α(p)‖ + ε), so strong edges are penalised less. 0 (the default) is plain TV: it
-    /// gains on piecewise-constant scenes and loses on smoothly shaded ones (docs/joint.md).
+    /// ε/(e_p + ε), e_p the excess of ‖∇α(p)‖ over its 3 × 3 mean, so jumps are penalised
+    /// less. 0 (the default) is plain TV: reweighting gains on piecewise-constant scenes and
+    /// loses a little on smoothly shaded ones (docs/joint.md).
     pub reweight_rounds: usize,
     /// ε of the reweighting as a multiple of the mean ‖∇α(p)‖ over the pixels.
     pub reweight_eps: f64,
