@@ -725,14 +725,8 @@ impl Joint {
                 std::array::from_fn(|jj| qy[jj] + sigma * gy[jj]),
             ];
             let n2: f32 = t.iter().flatten().map(|v| v * v).sum();
-            if n2 > lambda * lambda {
-                let f = if lambda > 0.0 {
-                    lambda / n2.sqrt()
-                } else {
-                    0.0
-                };
-                t.iter_mut().flatten().for_each(|v| *v *= f);
-            }
+            let f = ball_factor(n2, lambda);
+            t.iter_mut().flatten().for_each(|v| *v *= f);
             relax(qx, &t[0], over);
             relax(qy, &t[1], over);
             if *act == 0 && self.surely_feasible(bp) {
@@ -887,11 +881,8 @@ impl Joint {
             .for_each(|(wp, (qx, qy))| {
                 *wp = if eps > 0.0 { eps / (*wp + eps) } else { 1.0 };
                 let n2: f32 = qx.iter().chain(qy.iter()).map(|v| v * v).sum();
-                let cap = lambda * *wp;
-                if n2 > cap * cap {
-                    let f = cap / n2.sqrt();
-                    qx.iter_mut().chain(qy.iter_mut()).for_each(|v| *v *= f);
-                }
+                let f = ball_factor(n2, lambda * *wp);
+                qx.iter_mut().chain(qy.iter_mut()).for_each(|v| *v *= f);
             });
         st.bar.copy_from_slice(&st.alpha);
     }
@@ -1204,6 +1195,17 @@ struct PrimalRow<'a> {
     r: &'a [f32],
     m: &'a [f32],
     tck: &'a [[f32; 4]],
+}
+
+/// The factor that brings a vector of squared norm `n2` into the ball of radius `r`: 1 inside
+/// it, r/√n2 outside (0 for r = 0). The TV dual's projection, in the step and the reweighting.
+#[inline(always)]
+fn ball_factor(n2: f32, r: f32) -> f32 {
+    match (n2 > r * r, r > 0.0) {
+        (false, _) => 1.0,
+        (true, true) => r / n2.sqrt(),
+        (true, false) => 0.0,
+    }
 }
 
 /// q ← t + (γ − 1)(t − q): the relaxed dual from the step's result t (exactly t at γ = 1).

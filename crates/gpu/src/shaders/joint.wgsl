@@ -202,6 +202,18 @@ fn sum_sq(a: array<f32, J>, b: array<f32, J>) -> f32 {
     return s;
 }
 
+// The factor that brings a vector of squared norm n2 into the ball of radius r: 1 inside it,
+// r/√n2 outside (0 for r = 0); the CPU's `ball_factor`.
+fn ball_factor(n2: f32, r: f32) -> f32 {
+    if !(n2 > r * r) {
+        return 1.0;
+    }
+    if r > 0.0 {
+        return r / sqrt(n2);
+    }
+    return 0.0;
+}
+
 // ‖∇α(p)‖² over the J coefficients and both directions.
 fn alpha_grad_sq(p: u32, x: u32, row: u32) -> f32 {
     var gx: array<f32, J>;
@@ -264,14 +276,7 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         qy[j] = qy0[j] + sigma * g.y;
         bar[j] = st[at(BAR + j, p)];
     }
-    let n2 = sum_sq(qx, qy);
-    var f = 1.0;
-    if n2 > lambda * lambda {
-        f = 0.0;
-        if lambda > 0.0 {
-            f = lambda / sqrt(n2);
-        }
-    }
+    let f = ball_factor(sum_sq(qx, qy), lambda);
     // Relaxed: q ← t + (γ − 1)(t − q) with t the projected step (the CPU's `relax`).
     for (var j = 0u; j < J; j++) {
         let tx = qx[j] * f;
@@ -348,12 +353,7 @@ fn reweight(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgrou
         qx[j] = st[at(QX + j, p)];
         qy[j] = st[at(QY + j, p)];
     }
-    let n2 = sum_sq(qx, qy);
-    let cap = sc[SC_LAMBDA] * w;
-    var f = 1.0;
-    if n2 > cap * cap {
-        f = cap / sqrt(n2);
-    }
+    let f = ball_factor(sum_sq(qx, qy), sc[SC_LAMBDA] * w);
     for (var j = 0u; j < J; j++) {
         st[at(QX + j, p)] = qx[j] * f;
         st[at(QY + j, p)] = qy[j] * f;
