@@ -12,7 +12,6 @@
 
 use crate::error::{Error, Result};
 use crate::noise::DataWeights;
-use crate::unmix::second_difference;
 use crate::Cube;
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -36,6 +35,29 @@ pub enum Prior {
     Pnp,
 }
 
+/// The spectral prior of the joint method (`[reconstruct.joint] spectral_prior`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SpectralPrior {
+    /// The paper's curvature penalty η‖D₂Bα‖², as the unmixer uses it.
+    #[default]
+    Curvature,
+    /// The Gaussian prior trained with the basis (`Basis::coefficient_prior`): the
+    /// coefficients' variances over the training spectra against the misfit they leave.
+    /// Better on smooth scenes once converged, slower to converge (docs/joint.md).
+    Trained,
+}
+
+impl SpectralPrior {
+    /// The key's value, as the reports name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            SpectralPrior::Curvature => "curvature",
+            SpectralPrior::Trained => "trained",
+        }
+    }
+}
+
 /// How λ is set (`[reconstruct.joint] weight_rule`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -56,6 +78,8 @@ pub struct JointConfig {
     /// λ as a fraction of mean|y|·mean‖a‖·mean ω (the TV weight free of the frame's, the
     /// patterns' and the weights' scale); the discrepancy search starts from it.
     pub tv_weight: f64,
+    /// The spectral prior on each pixel's α: the paper's curvature (η), or trained with the basis.
+    pub spectral_prior: SpectralPrior,
     /// τ/σ balance: τ = ratio·s/L, σ = 1/(ratio·s·L), s = mean|α₀|/λ (α's scale over the dual's).
     pub step_ratio: f64,
     /// Over-relaxation γ of the Chambolle–Pock step (Condat 2013): z ← z + γ(T z − z),
@@ -97,6 +121,7 @@ impl Default for JointConfig {
         JointConfig {
             iterations: 100,
             tv_weight: 0.02,
+            spectral_prior: SpectralPrior::Curvature,
             step_ratio: 1.0,
             relaxation: 1.8,
             prior: Prior::Tv,
@@ -212,6 +237,10 @@ pub struct JointStats {
     /// "tv" or "pnp".
     #[serde(default)]
     pub prior: String,
+    /// The spectral prior on α: "curvature" (the paper's η) or "trained" (empty in reports
+    /// made before it existed, which ran the curvature).
+    #[serde(default)]
+    pub spectral_prior: String,
     /// Σ_p ω_p(y_p − a_pᵀα_p)² / #{p: ω_p > 0} at the end: ≈ 1 when the fit matches the noise.
     #[serde(default)]
     pub residual_ratio: f64,
@@ -244,7 +273,7 @@ pub struct Joint {
     /// per-pixel products run over whole vector lanes.
     bcol: Vec<f32>,
     nbp: usize,
-    /// η'Q = η'(D₂B)ᵀ(D₂B), J × J.
+    /// The spectral prior P in the joint's units (P·mean‖a‖²/‖F‖²_F), J × J.
     eq: DMatrix<f64>,
     /// ‖K‖ bound: √(8 + β²λmax(BᵀB)).
     norm_k: f64,
@@ -286,12 +315,13 @@ pub struct JointState {
 
 impl Joint {
     /// `patterns`: the C effective channel patterns S'_i (planes); `system` F (C × J);
-    /// `basis` B (bands × J); `eta` the unmixer's smoothness weight in band-index units.
+    /// `basis` B (bands × J); `prior` the spectral prior's J × J quadratic term in the
+    /// unmixer's units (`unmix::curvature(B, η)` or `Basis::coefficient_prior`).
     pub fn new(
         patterns: &Cube,
         system: &DMatrix<f64>,
         basis: &DMatrix<f64>,
-        eta: f64,
+        prior: &DMatrix<f64>,
         cfg: &JointConfig,
         file: &str,
     ) -> Result<Joint> {
@@ -315,8 +345,12 @@ impl Joint {
                 "joint: the patterns, F or B hold a non-finite value".into(),
             ));
         }
-        if !(eta.is_finite() && eta >= 0.0) {
-            return Err(Error::Numerical(format!("joint: η = {eta} must be ≥ 0")));
+        if prior.shape() != (j, j) || prior.iter().any(|v| !v.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "joint: the spectral prior is {}×{} or not finite; it must be a finite {j}×{j} matrix",
+                prior.nrows(),
+                prior.ncols()
+            )));
         }
         let a = patterns.mix(
             &(0..j)
@@ -342,10 +376,9 @@ impl Joint {
         }
         // β scales the constraint's block of K to the gradient's norm (‖∇‖² ≤ 8).
         let beta = (8.0 / lmax).sqrt();
-        let d2b = second_difference(bands) * basis;
-        // The unmixer weighs ‖x − Fα‖² (data Hessian FᵀF) against η‖D₂Bα‖²; here the data
-        // Hessian is a aᵀ, so η is scaled by mean‖a‖² / ‖F‖²_F to keep the same balance.
-        let eta_joint = eta * mean_a2 / system.norm_squared();
+        // The unmixer weighs ‖x − Fα‖² (data Hessian FᵀF) against the prior's αᵀPα; here the
+        // data Hessian is a aᵀ, so P is scaled by mean‖a‖² / ‖F‖²_F to keep the same balance.
+        let prior_scale = mean_a2 / system.norm_squared();
         let nbp = bands.div_ceil(LANES) * LANES;
         Ok(Joint {
             w,
@@ -365,7 +398,7 @@ impl Joint {
                 })
                 .collect(),
             nbp,
-            eq: eta_joint * d2b.transpose() * &d2b,
+            eq: prior * prior_scale,
             norm_k: 4.0,
             col_range: (0..j)
                 .map(|jj| {
@@ -911,6 +944,7 @@ impl Joint {
             violation: 0.0,
             seconds: t0.elapsed().as_secs_f64(),
             prior: format!("{:?}", self.cfg.prior).to_lowercase(),
+            spectral_prior: self.cfg.spectral_prior.name().into(),
             residual_ratio: sum / n.max(1) as f64,
             noise_weights,
             saturated_pixels: st.cap.iter().filter(|c| c.is_finite()).count(),
@@ -1034,7 +1068,7 @@ impl Joint {
             a: &self.a,
             basis_columns: &self.bcol,
             column_range: &self.col_range,
-            smoothness: &self.eq,
+            spectral_prior: &self.eq,
             operator_norm: self.norm_k,
             mean_a_norm: self.mean_a_norm,
             step_product: STEP_PRODUCT,
@@ -1060,8 +1094,8 @@ pub struct JointTables<'a> {
     pub basis_columns: &'a [f32],
     /// (min_k, max_k) of each column of βB (`surely_feasible`'s bound).
     pub column_range: &'a [(f32, f32)],
-    /// η'Q (J × J).
-    pub smoothness: &'a DMatrix<f64>,
+    /// The spectral prior's quadratic term in the joint's units (J × J).
+    pub spectral_prior: &'a DMatrix<f64>,
     /// The bound on ‖K‖ the steps use.
     pub operator_norm: f64,
     /// mean‖a_p‖ (λ's scale).
@@ -1372,6 +1406,7 @@ fn from_pixel_major(v: &[f32], w: usize, h: usize, j: usize) -> Cube {
 mod tests {
     use super::*;
     use crate::carriers::default_layout;
+    use crate::unmix::curvature;
 
     const BANDS: usize = 16;
 
@@ -1438,7 +1473,35 @@ mod tests {
 
     fn solver(w: usize, eta: f64, cfg: JointConfig) -> Joint {
         let b = basis();
-        Joint::new(&patterns(w, w), &system(&b), &b, eta, &cfg, "t.toml").unwrap()
+        Joint::new(
+            &patterns(w, w),
+            &system(&b),
+            &b,
+            &curvature(&b, eta),
+            &cfg,
+            "t.toml",
+        )
+        .unwrap()
+    }
+
+    /// The spectral prior enters scaled by mean‖a‖²/‖F‖²_F (the unmixer's balance of data and
+    /// prior, per unit of data); a prior of the wrong size or with a NaN is refused.
+    #[test]
+    fn the_spectral_prior_enters_at_the_unmixers_balance() {
+        let (b, cfg) = (basis(), JointConfig::default());
+        let f = system(&b);
+        let p = DMatrix::from_fn(4, 4, |r, c| if r == c { 1.0 + r as f64 } else { 0.1 });
+        let j = Joint::new(&patterns(16, 16), &f, &b, &p, &cfg, "t.toml").unwrap();
+        let mean_a2 = j.a.iter().map(|&v| (v as f64).powi(2)).sum::<f64>() / 256.0;
+        let want = &p * (mean_a2 / f.norm_squared());
+        assert!((j.tables().spectral_prior - &want).amax() < 1e-12 * want.amax());
+        for bad in [
+            DMatrix::identity(3, 3),
+            DMatrix::from_element(4, 4, f64::NAN),
+        ] {
+            let e = Joint::new(&patterns(16, 16), &f, &b, &bad, &cfg, "t.toml");
+            assert!(matches!(e, Err(Error::Numerical(m)) if m.contains("spectral prior")));
+        }
     }
 
     /// The seed: every pixel the image-wide mean of the truth (what a blurry estimate gives).
@@ -1811,7 +1874,15 @@ mod tests {
         // Two filters alike to 1e-9 (F near-singular): the prior keeps the problem posed.
         let b = basis();
         let f = near_singular(&b);
-        let near = Joint::new(&patterns(32, 32), &f, &b, 1.0, cfg, "t.toml").unwrap();
+        let near = Joint::new(
+            &patterns(32, 32),
+            &f,
+            &b,
+            &curvature(&b, 1.0),
+            cfg,
+            "t.toml",
+        )
+        .unwrap();
         let (est, st) = near
             .run(&frame_of(&near, &t), &flat_seed(&t), None)
             .unwrap();
@@ -1834,9 +1905,16 @@ mod tests {
         let b = basis();
         let f = near_singular(&b);
         // F = 0: the frame says nothing of α; refused with the reason.
-        let e = Joint::new(&patterns(32, 32), &(f * 0.0), &b, 1.0, &cfg, "t.toml")
-            .err()
-            .unwrap();
+        let e = Joint::new(
+            &patterns(32, 32),
+            &(f * 0.0),
+            &b,
+            &curvature(&b, 1.0),
+            &cfg,
+            "t.toml",
+        )
+        .err()
+        .unwrap();
         assert!(e.to_string().contains("no energy"), "{e}");
         // Bad settings name their key.
         for (bad, key) in [
@@ -1877,11 +1955,23 @@ mod tests {
                 "`reconstruct.joint.reweight_rounds` = 2:",
             ),
         ] {
-            let e = Joint::new(&patterns(32, 32), &system(&b), &b, 1.0, &bad, "t.toml")
-                .err()
-                .unwrap();
-            assert!(e.to_string().contains(key), "{e}");
+            let e = refusal(&bad);
+            assert!(e.contains(key), "{e}");
         }
+    }
+
+    /// The error of a 32² solver with settings `bad`.
+    fn refusal(bad: &JointConfig) -> String {
+        let b = basis();
+        let e = Joint::new(
+            &patterns(32, 32),
+            &system(&b),
+            &b,
+            &curvature(&b, 1.0),
+            bad,
+            "t.toml",
+        );
+        e.err().expect("refused").to_string()
     }
 
     /// y = Aα + N(0, σ²) with ω = 1/σ²: the discrepancy rule ends with Σω r²/N within its
@@ -1994,7 +2084,15 @@ mod tests {
         assert!(est.all_finite() && st.objective.iter().all(|v| v.is_finite()));
         let b = basis();
         let f = near_singular(&b);
-        let near = Joint::new(&patterns(32, 32), &f, &b, 1.0, &pnp(100), "t.toml").unwrap();
+        let near = Joint::new(
+            &patterns(32, 32),
+            &f,
+            &b,
+            &curvature(&b, 1.0),
+            &pnp(100),
+            "t.toml",
+        )
+        .unwrap();
         let (est, _) = near
             .run(&frame_of(&near, &t), &flat_seed(&t), None)
             .unwrap();
@@ -2009,10 +2107,8 @@ mod tests {
             .unwrap_err();
         assert!(e.to_string().contains("weight"), "{e}");
         let refused = |bad: JointConfig, key: &str| {
-            let e = Joint::new(&patterns(32, 32), &system(&b), &b, 1.0, &bad, "t.toml")
-                .err()
-                .unwrap();
-            assert!(e.to_string().contains(key), "{e}");
+            let e = refusal(&bad);
+            assert!(e.contains(key), "{e}");
         };
         let zero_weight = JointConfig {
             pnp_weight: 0.0,

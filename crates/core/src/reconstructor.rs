@@ -9,9 +9,9 @@ use crate::carriers::Carrier;
 use crate::demux::{Demux, WindowShape, SUPER_GAUSSIAN_ORDER};
 use crate::error::{Error, Result};
 use crate::gap::{Gap, GapConfig, GapStats, Method};
-use crate::joint::{Joint, JointConfig, JointStats, WeightRule};
+use crate::joint::{Joint, JointConfig, JointStats, SpectralPrior, WeightRule};
 use crate::noise::NoiseModel;
-use crate::unmix::{UnmixStats, Unmixer};
+use crate::unmix::{curvature, UnmixStats, Unmixer};
 use crate::Cube;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -40,6 +40,9 @@ pub struct Design {
     /// The camera's temporal noise (EMVA 1288 gain and dark noise, from its photon-transfer
     /// measurement); None when the frames are noiseless or the camera is not characterised.
     pub noise: Option<NoiseModel>,
+    /// The basis's trained Gaussian prior as a J × J quadratic term in the unmixer's units
+    /// (`Basis::coefficient_prior`); None when the basis has none.
+    pub spectral_prior: Option<DMatrix<f64>>,
 }
 
 /// Where the reconstruction takes the exposure weights w_ik from.
@@ -299,13 +302,12 @@ impl Reconstructor {
                     Some(w) => z_patterns.mix(w)?,
                     None => z_patterns,
                 };
-                let eta = cfg.eta / design.band_step_nm.powi(4);
                 Some(
                     Joint::new(
                         &channel_patterns,
                         &design.system,
                         &design.basis,
-                        eta,
+                        &joint_prior(cfg, design, file)?,
                         &cfg.joint,
                         file,
                     )
@@ -472,12 +474,32 @@ pub fn unmixer(cfg: &ReconConfig, design: &Design) -> Result<Unmixer> {
             design.system.ncols()
         )));
     }
-    // The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ².
-    let eta = cfg.eta / design.band_step_nm.powi(4);
-    let unmixer = Unmixer::new(&design.system, &design.basis, eta)?;
+    let unmixer = Unmixer::new(&design.system, &design.basis, band_eta(cfg, design))?;
     match &design.output_gains {
         Some(g) => unmixer.with_output_gains(g),
         None => Ok(unmixer),
+    }
+}
+
+/// The paper's penalty is η‖∂²r/∂λ²‖² with λ in nm: the discrete D₂ divided by Δλ², so the
+/// weight per band index is η/Δλ⁴.
+fn band_eta(cfg: &ReconConfig, design: &Design) -> f64 {
+    cfg.eta / design.band_step_nm.powi(4)
+}
+
+/// The joint method's spectral prior: the paper's curvature penalty (η) or the basis's trained
+/// Gaussian prior (the design's; refused naming the key when the design has none).
+fn joint_prior(cfg: &ReconConfig, design: &Design, file: &str) -> Result<DMatrix<f64>> {
+    match cfg.joint.spectral_prior {
+        SpectralPrior::Curvature => Ok(curvature(&design.basis, band_eta(cfg, design))),
+        SpectralPrior::Trained => design.spectral_prior.clone().ok_or_else(|| {
+            Error::config(
+                file,
+                "reconstruct.joint.spectral_prior",
+                "\"trained\"",
+                "needs the design's trained prior, and a basis coefficient never varies over the training spectra (use \"curvature\")",
+            )
+        }),
     }
 }
 
@@ -549,6 +571,50 @@ fn demixing(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A design with a 31-band basis of two columns and the given trained prior.
+    fn two_vector_design(prior: Option<DMatrix<f64>>) -> Design {
+        Design {
+            width: 8,
+            height: 8,
+            carriers: Vec::new(),
+            system: DMatrix::identity(2, 2),
+            basis: DMatrix::from_fn(31, 2, |b, j| if j == 0 { 1.0 } else { b as f64 / 30.0 }),
+            output_gains: None,
+            band_step_nm: 10.0,
+            white: vec![1.0, 1.0],
+            exposure_weights: None,
+            noise: None,
+            spectral_prior: prior,
+        }
+    }
+
+    /// The joint method's prior: the curvature at η/Δλ⁴ (zero for a basis linear in the band,
+    /// which has no curvature), the design's trained prior as given, and without one a refusal
+    /// naming the file, the key and the value.
+    #[test]
+    fn the_joint_prior_is_the_curvature_or_the_designs_trained_one() {
+        let mut cfg = ReconConfig::default();
+        let p = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.5, 4.0]));
+        let design = two_vector_design(Some(p.clone()));
+        let curv = joint_prior(&cfg, &design, "rig.toml").unwrap();
+        assert_eq!(curv, curvature(&design.basis, cfg.eta / 1e4));
+        assert!(
+            curv.amax() < 1e-12,
+            "a linear basis has no curvature: {curv}"
+        );
+        cfg.joint.spectral_prior = SpectralPrior::Trained;
+        assert_eq!(joint_prior(&cfg, &design, "rig.toml").unwrap(), p);
+        let e = joint_prior(&cfg, &two_vector_design(None), "rig.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("rig.toml")
+                && e.contains("reconstruct.joint.spectral_prior")
+                && e.contains("\"trained\""),
+            "{e}"
+        );
+    }
 
     /// The discrepancy rule needs a noise model with its weights on; the errors name the file,
     /// the key and the reason.

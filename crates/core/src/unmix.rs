@@ -126,6 +126,12 @@ pub fn second_difference(bands: usize) -> DMatrix<f64> {
     })
 }
 
+/// η(D₂B)ᵀ(D₂B): the paper's curvature penalty on the spectrum Bα as a J × J quadratic term.
+pub fn curvature(b: &DMatrix<f64>, eta: f64) -> DMatrix<f64> {
+    let d2b = second_difference(b.nrows()) * b;
+    d2b.transpose() * d2b * eta
+}
+
 impl Unmixer {
     /// Factor the problem for channel matrix `f` (channels × J) and basis `b` (bands × J).
     pub fn new(f: &DMatrix<f64>, b: &DMatrix<f64>, eta: f64) -> Result<Unmixer> {
@@ -153,8 +159,7 @@ impl Unmixer {
         if f.iter().chain(b.iter()).any(|v| !v.is_finite()) {
             return Err(Error::Numerical("F or B holds a non-finite value".into()));
         }
-        let d2b = second_difference(m) * b;
-        let h = f.transpose() * f + eta * d2b.transpose() * &d2b;
+        let h = f.transpose() * f + curvature(b, eta);
         let eig = nalgebra::SymmetricEigen::new(h.clone());
         let (lo, hi) = (eig.eigenvalues.min(), eig.eigenvalues.max());
         let condition = if lo > 0.0 { hi / lo } else { f64::INFINITY };
@@ -578,8 +583,7 @@ mod tests {
 
     /// The problem in the reference form: H and g = Fᵀx̂, built from F, B, η directly.
     fn hessian(f: &DMatrix<f64>, b: &DMatrix<f64>, eta: f64) -> DMatrix<f64> {
-        let d = second_difference(b.nrows()) * b;
-        f.transpose() * f + eta * d.transpose() * d
+        f.transpose() * f + curvature(b, eta)
     }
 
     fn objective(h: &DMatrix<f64>, g: &DVector<f64>, a: &DVector<f64>) -> f64 {

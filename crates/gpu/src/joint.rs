@@ -10,7 +10,7 @@ use crate::context::{linear_groups, GpuContext, Launch};
 use crate::error::{GpuError, Result};
 use crate::gap;
 use crate::mix::GpuMix;
-use specmux_core::joint::{reweights_before, Joint, JointStats};
+use specmux_core::joint::{reweights_before, Joint, JointStats, SpectralPrior};
 use specmux_core::Cube;
 
 /// Threads per workgroup of shaders/joint.wgsl.
@@ -60,6 +60,9 @@ pub struct GpuJoint {
     trace: bool,
     /// Over-relaxation γ (reported in the stats).
     relaxation: f64,
+    /// The TV weights' refreshes and the spectral prior (reported in the stats).
+    reweight_rounds: usize,
+    spectral_prior: SpectralPrior,
     /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
     reweights: usize,
     j: usize,
@@ -169,6 +172,8 @@ impl GpuJoint {
             iterations: t.config.iterations,
             trace: t.config.trace_objective,
             relaxation: t.config.relaxation,
+            reweight_rounds: t.config.reweight_rounds,
+            spectral_prior: t.config.spectral_prior,
             reweights: t.config.reweight_rounds,
             j,
             nbp: t.padded_bands,
@@ -351,6 +356,9 @@ impl GpuJoint {
             steps: [f(tail + 4), f(tail + 5)],
             violation: if hi > 0.0 { neg / hi } else { 0.0 },
             relaxation: Some(self.relaxation),
+            prior: "tv".into(),
+            spectral_prior: self.spectral_prior.name().into(),
+            reweight_rounds: self.reweight_rounds,
             ..Default::default()
         })
     }
@@ -467,8 +475,8 @@ fn source(j: usize, nbp: usize) -> String {
 }
 
 /// shaders/joint.wgsl's `rig`: a (plane-major) | βB by columns | column minima | maxima |
-/// η'Q row-major | its eigenvectors (column i the i-th) | eigenvalues, in f32. M = (I + τη'Q)⁻¹
-/// is V diag(1/(1 + τe)) Vᵀ from these, since τ is known only on the GPU.
+/// P' (the spectral prior) row-major | its eigenvectors (column i the i-th) | eigenvalues, in
+/// f32. M = (I + τP')⁻¹ is V diag(1/(1 + τe)) Vᵀ from these, since τ is known only on the GPU.
 fn rig_tables(joint: &Joint) -> Vec<f32> {
     let t = joint.tables();
     let (j, n) = (t.basis_len, t.width * t.height);
@@ -478,8 +486,8 @@ fn rig_tables(joint: &Joint) -> Vec<f32> {
     out.extend_from_slice(t.basis_columns);
     out.extend(t.column_range.iter().map(|r| r.0));
     out.extend(t.column_range.iter().map(|r| r.1));
-    out.extend(t.smoothness.transpose().iter().map(|&v| v as f32));
-    let eig = t.smoothness.clone().symmetric_eigen();
+    out.extend(t.spectral_prior.transpose().iter().map(|&v| v as f32));
+    let eig = t.spectral_prior.clone().symmetric_eigen();
     out.extend(eig.eigenvectors.transpose().iter().map(|&v| v as f32));
     out.extend(eig.eigenvalues.iter().map(|&v| v as f32));
     out

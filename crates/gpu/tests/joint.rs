@@ -32,8 +32,9 @@ mod common;
 
 use nalgebra::DMatrix;
 use specmux_core::carriers::default_layout;
-use specmux_core::joint::{Joint, JointConfig};
+use specmux_core::joint::{Joint, JointConfig, SpectralPrior};
 use specmux_core::noise::DataWeights;
+use specmux_core::unmix::curvature;
 use specmux_core::Cube;
 use specmux_gpu::joint::GpuJoint;
 use specmux_gpu::{wgpu, GpuContext};
@@ -96,7 +97,7 @@ fn solver(iterations: usize) -> Joint {
 /// The solver with these settings and smoothness weight η.
 fn solver_with(cfg: &JointConfig, eta: f64) -> Joint {
     let (b, f) = basis_and_system();
-    Joint::new(&patterns(), &f, &b, eta, cfg, "t.toml").unwrap()
+    Joint::new(&patterns(), &f, &b, &curvature(&b, eta), cfg, "t.toml").unwrap()
 }
 
 /// y = aᵀα per pixel for α planes.
@@ -351,6 +352,42 @@ fn a_reweighted_run_matches_the_core() {
     for (got, want) in stats.objective.iter().zip(&cpu.objective) {
         assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
     }
+}
+
+/// A diagonal spectral prior of unequal weights (the form of the trained prior) in place of
+/// the curvature: the GPU's eigenpair tables follow the core's prior, not the curvature's.
+#[test]
+fn a_diagonal_spectral_prior_matches_the_core() {
+    let Some(ctx) = common::context() else { return };
+    let (b, f) = basis_and_system();
+    let p = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.01, 0.5, 2.0, 8.0]));
+    let trained = JointConfig {
+        spectral_prior: SpectralPrior::Trained,
+        ..config(30)
+    };
+    let joint = Joint::new(&patterns(), &f, &b, &p, &trained, "t.toml").unwrap();
+    let (frame, seed) = problem(&joint);
+    let (alpha, cpu) = joint.run(&frame, &seed, None).unwrap();
+    let (curved, _) = solver(30).run(&frame, &seed, None).unwrap();
+    assert!(
+        rel(&curved.data, &alpha.data) > 1e-3,
+        "the prior must change the run"
+    );
+    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
+    submit(&ctx, |enc| g.encode(enc));
+    let stats = g.stats(&ctx).unwrap();
+    let e = rel(&g.state(&ctx).unwrap().alpha, &alpha.data);
+    eprintln!("diagonal prior, α after 30 iterations: relative L2 {e:.2e}");
+    assert!(e < 1e-4, "α: {e:.2e}");
+    let (got, want) = (
+        stats.objective.last().unwrap(),
+        cpu.objective.last().unwrap(),
+    );
+    assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
+    assert_eq!(
+        (stats.spectral_prior.as_str(), cpu.spectral_prior.as_str()),
+        ("trained", "trained")
+    );
 }
 
 #[test]

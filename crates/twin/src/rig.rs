@@ -197,6 +197,7 @@ impl Rig {
             white: self.white(),
             exposure_weights: self.exposure_weights.clone(),
             noise: self.noise,
+            spectral_prior: self.basis.coefficient_prior(&self.lit_projection()),
         }
     }
 
@@ -277,6 +278,18 @@ impl Rig {
     /// linear on the grid.
     pub fn system_matrix(&self) -> nalgebra::DMatrix<f64> {
         &self.projection.w * self.prior()
+    }
+
+    /// What each band of a reflectance-like spectrum gives each channel (channels × bands):
+    /// W, times diag(L̃) for a lit radiance scene, so that F = this · B.
+    pub fn lit_projection(&self) -> nalgebra::DMatrix<f64> {
+        let mut w = self.projection.w.clone();
+        if let Some(g) = self.light_gains() {
+            for (mut col, g) in w.column_iter_mut().zip(g) {
+                col *= g;
+            }
+        }
+        w
     }
 }
 

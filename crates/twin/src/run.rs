@@ -509,8 +509,8 @@ fn joint_noise_line(j: &specmux_core::joint::JointStats) -> String {
         "uniform weights, Σr²/N (frame units²)"
     };
     let mut s = format!(
-        "joint prior {}: {weights} = {:.3}",
-        j.prior, j.residual_ratio
+        "joint prior {} (spectral: {}): {weights} = {:.3}",
+        j.prior, j.spectral_prior, j.residual_ratio
     );
     if j.reweight_rounds > 0 {
         s += &format!(
