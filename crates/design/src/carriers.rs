@@ -14,7 +14,7 @@ use serde::de::IntoDeserializer;
 use serde::{Deserialize, Serialize};
 use specmux_core::demux::WindowShape;
 use specmux_core::spectral::Library;
-use specmux_core::unmix::second_difference;
+use specmux_core::unmix::curvature;
 use specmux_core::{Error, Result};
 use specmux_report::progress;
 use specmux_twin::forward::Pipeline;
@@ -158,9 +158,7 @@ fn user_cube(path: &Path, base: &Experiment) -> Result<Experiment> {
 fn unmix_weights(rig: &Rig, eta: f64) -> Result<Vec<f64>> {
     let f = rig.system_matrix();
     let b = &rig.basis.vectors;
-    let d2b = second_difference(b.nrows()) * b;
-    let h: DMatrix<f64> =
-        f.transpose() * &f + eta / rig.grid.step_nm.powi(4) * d2b.transpose() * d2b;
+    let h: DMatrix<f64> = f.transpose() * &f + curvature(b, eta / rig.grid.step_nm.powi(4));
     let m = h
         .cholesky()
         .ok_or_else(|| {

@@ -269,6 +269,7 @@ impl Evaluator {
 pub(crate) mod tests {
     use super::*;
     use specmux_core::spectral::Library;
+    use specmux_core::unmix::curvature;
     use specmux_twin::optics::wheel::ColorWheel;
     use specmux_twin::scene::Materials;
     use specmux_twin::{Experiment, Rig};
@@ -377,8 +378,7 @@ pub(crate) mod tests {
         let rig = Rig::build(&exp, &lib, &m).unwrap();
         let f = rig.system_matrix();
         let b = &rig.basis.vectors;
-        let d2b = second_difference(b.nrows()) * b;
-        let h = f.transpose() * &f + 200.0 / 1e4 * d2b.transpose() * d2b;
+        let h = f.transpose() * &f + curvature(b, 200.0 / 1e4);
         let p = b * h.try_inverse().unwrap() * f.transpose();
         let r = sample_matrix(&m.held_out, &rig.grid).unwrap();
         let e = &p * &rig.projection.w * &r - &r;

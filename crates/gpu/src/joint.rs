@@ -60,8 +60,7 @@ pub struct GpuJoint {
     trace: bool,
     /// Over-relaxation γ (reported in the stats).
     relaxation: f64,
-    /// The TV weights' refreshes and the spectral prior (reported in the stats).
-    reweight_rounds: usize,
+    /// The spectral prior (reported in the stats).
     spectral_prior: SpectralPrior,
     /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
     reweights: usize,
@@ -172,7 +171,6 @@ impl GpuJoint {
             iterations: t.config.iterations,
             trace: t.config.trace_objective,
             relaxation: t.config.relaxation,
-            reweight_rounds: t.config.reweight_rounds,
             spectral_prior: t.config.spectral_prior,
             reweights: t.config.reweight_rounds,
             j,
@@ -358,7 +356,7 @@ impl GpuJoint {
             relaxation: Some(self.relaxation),
             prior: "tv".into(),
             spectral_prior: self.spectral_prior.name().into(),
-            reweight_rounds: self.reweight_rounds,
+            reweight_rounds: self.reweights,
             ..Default::default()
         })
     }

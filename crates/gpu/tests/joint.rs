@@ -146,6 +146,18 @@ fn gpu_solver(
     (g, cube)
 }
 
+/// A whole GPU run of `joint` from `seed` on `frame` (gains 1): its α (plane-major) and stats.
+fn gpu_run(
+    ctx: &GpuContext,
+    joint: &Joint,
+    frame: &Cube,
+    seed: &Cube,
+) -> (Vec<f32>, specmux_core::joint::JointStats) {
+    let (g, _) = gpu_solver(ctx, joint, frame, seed, &[1.0; BANDS]);
+    submit(ctx, |enc| g.encode(enc));
+    (g.state(ctx).unwrap().alpha, g.stats(ctx).unwrap())
+}
+
 fn submit(ctx: &GpuContext, f: impl FnOnce(&mut wgpu::CommandEncoder)) {
     let mut enc = ctx.device.create_command_encoder(&Default::default());
     f(&mut enc);
@@ -312,9 +324,7 @@ fn an_untraced_run_keeps_the_objective_at_the_seed_and_the_end() {
     let joint = solver_with(&untraced, 1.0);
     let (frame, seed) = problem(&joint);
     let (_, cpu) = joint.run(&frame, &seed, None).unwrap();
-    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
-    submit(&ctx, |enc| g.encode(enc));
-    let stats = g.stats(&ctx).unwrap();
+    let (_, stats) = gpu_run(&ctx, &joint, &frame, &seed);
     assert_eq!((stats.iterations, cpu.iterations), (12, 12));
     assert_eq!((stats.objective.len(), cpu.objective.len()), (2, 2));
     for (got, want) in stats.objective.iter().zip(&cpu.objective) {
@@ -342,10 +352,8 @@ fn a_reweighted_run_matches_the_core() {
         rel(&plain.data, &alpha.data) > 1e-2,
         "the reweighting must change the run"
     );
-    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
-    submit(&ctx, |enc| g.encode(enc));
-    let stats = g.stats(&ctx).unwrap();
-    let e = rel(&g.state(&ctx).unwrap().alpha, &alpha.data);
+    let (gpu, stats) = gpu_run(&ctx, &joint, &frame, &seed);
+    let e = rel(&gpu, &alpha.data);
     eprintln!("reweighted α after 30 iterations: relative L2 {e:.2e}");
     assert!(e < 1e-4, "α: {e:.2e}");
     assert_eq!(stats.objective.len(), cpu.objective.len());
@@ -373,10 +381,8 @@ fn a_diagonal_spectral_prior_matches_the_core() {
         rel(&curved.data, &alpha.data) > 1e-3,
         "the prior must change the run"
     );
-    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
-    submit(&ctx, |enc| g.encode(enc));
-    let stats = g.stats(&ctx).unwrap();
-    let e = rel(&g.state(&ctx).unwrap().alpha, &alpha.data);
+    let (gpu, stats) = gpu_run(&ctx, &joint, &frame, &seed);
+    let e = rel(&gpu, &alpha.data);
     eprintln!("diagonal prior, α after 30 iterations: relative L2 {e:.2e}");
     assert!(e < 1e-4, "α: {e:.2e}");
     let (got, want) = (
