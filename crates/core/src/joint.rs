@@ -82,6 +82,11 @@ pub struct JointConfig {
     pub spectral_prior: SpectralPrior,
     /// τ/σ balance: τ = ratio·s/L, σ = 1/(ratio·s·L), s = mean|α₀|/λ (α's scale over the dual's).
     pub step_ratio: f64,
+    /// Take the balance s again from the iterate halfway through the run (τ, σ and the
+    /// proximal tables recomputed, the extrapolation kept): the seed's scale, inflated by the
+    /// Fourier estimate's aliasing, sets too long a primal step for the later iterations
+    /// (docs/joint.md, "The mid-run rebalance").
+    pub rebalance: bool,
     /// Over-relaxation γ of the Chambolle–Pock step (Condat 2013): z ← z + γ(T z − z),
     /// 0 < γ < 2; 1 is the plain iteration. 1.8 reaches in 10 iterations what the plain one
     /// reaches in about 15–20 (docs/joint.md). TV prior only.
@@ -123,6 +128,7 @@ impl Default for JointConfig {
             tv_weight: 0.02,
             spectral_prior: SpectralPrior::Curvature,
             step_ratio: 1.0,
+            rebalance: true,
             relaxation: 1.8,
             prior: Prior::Tv,
             weight_rule: WeightRule::Fixed,
@@ -482,8 +488,8 @@ impl Joint {
         Ok(st)
     }
 
-    /// Set λ: the TV dual rescaled into the new ball, the steps for the new balance (s =
-    /// mean|α|/λ), the proximal tables for the new τ, the extrapolation restarted (ᾱ = α).
+    /// Set λ: the TV dual rescaled into the new ball, the steps balanced for it
+    /// ([`Joint::balance_steps`]), the extrapolation restarted (ᾱ = α).
     pub fn set_lambda(&self, st: &mut JointState, lambda: f64) -> Result<()> {
         let f = if st.lambda > 0.0 {
             (lambda / st.lambda as f64) as f32
@@ -494,6 +500,14 @@ impl Joint {
             .iter_mut()
             .chain(st.qy.iter_mut())
             .for_each(|v| *v *= f);
+        self.balance_steps(st, lambda)?;
+        st.bar.copy_from_slice(&st.alpha);
+        Ok(())
+    }
+
+    /// λ, the steps for the balance s = mean|α|/λ of the current α (τ = ratio·s/L,
+    /// σ = 1/(ratio·s·L)) and the proximal tables for the new τ; the duals and ᾱ are kept.
+    fn balance_steps(&self, st: &mut JointState, lambda: f64) -> Result<()> {
         let mean_alpha =
             st.alpha.iter().map(|v| v.abs() as f64).sum::<f64>() / st.alpha.len() as f64;
         let scale = if lambda > 0.0 && mean_alpha > 0.0 {
@@ -504,7 +518,6 @@ impl Joint {
         let tau = self.cfg.step_ratio * scale * STEP_PRODUCT.sqrt() / self.norm_k;
         let sigma = STEP_PRODUCT.sqrt() / (self.cfg.step_ratio * scale * self.norm_k);
         (st.mat, st.m, st.tck) = self.prox_tables(tau, st)?;
-        st.bar.copy_from_slice(&st.alpha);
         (st.lambda, st.tau, st.sigma) = (lambda as f32, tau as f32, sigma as f32);
         Ok(())
     }
@@ -853,28 +866,30 @@ impl Joint {
             }
             WeightRule::Discrepancy => Some(discrepancy::choose(self, &mut st)?),
         };
-        let objective = self.iterate(&mut st, self.cfg.iterations, self.cfg.reweight_rounds)?;
+        let stages = Stages {
+            reweights: self.cfg.reweight_rounds,
+            rebalance: self.cfg.rebalance,
+        };
+        let objective = self.iterate(&mut st, self.cfg.iterations, stages)?;
         let mut stats = self.finish(&st, objective, t0, weights.is_some())?;
         stats.discrepancy = search;
         Ok((from_pixel_major(&st.alpha, self.w, self.h, self.j), stats))
     }
 
-    /// `iterations` Chambolle–Pock steps in `reweights` + 1 equal stages, the TV weights
-    /// refreshed between stages: the objective before each (traced; else at the start only)
-    /// and after the last.
-    fn iterate(
-        &self,
-        st: &mut JointState,
-        iterations: usize,
-        reweights: usize,
-    ) -> Result<Vec<f64>> {
+    /// `iterations` Chambolle–Pock steps, the steps rebalanced halfway and the TV weights
+    /// refreshed between stages as `stages` says: the objective before each (traced; else at
+    /// the start only) and after the last.
+    fn iterate(&self, st: &mut JointState, iterations: usize, stages: Stages) -> Result<Vec<f64>> {
         let mut objective = Vec::with_capacity(iterations + 1);
         if !self.cfg.trace_objective {
             objective.push(self.objective(st));
         }
         for it in 0..iterations {
             crate::interrupt::check("the joint reconstruction")?;
-            if reweights_before(it, iterations, reweights) {
+            if stages.rebalance && rebalances_before(it, iterations) {
+                self.balance_steps(st, st.lambda as f64)?;
+            }
+            if reweights_before(it, iterations, stages.reweights) {
                 self.reweight(st);
             }
             if self.cfg.trace_objective {
@@ -1285,6 +1300,21 @@ fn prox_pixel<const J: usize>(
     out
 }
 
+/// What happens between the iterations of a run (`Joint::iterate`).
+#[derive(Clone, Copy, Debug)]
+struct Stages {
+    /// TV reweightings, splitting the run into `reweights` + 1 equal stages.
+    reweights: usize,
+    /// Rebalance the steps halfway ([`rebalances_before`]).
+    rebalance: bool,
+}
+
+/// Whether the steps are rebalanced before iteration `it` of `iterations` (halfway; the
+/// CPU's and the GPU's alike).
+pub fn rebalances_before(it: usize, iterations: usize) -> bool {
+    it > 0 && it == iterations / 2
+}
+
 /// Whether the TV weights are refreshed before iteration `it` of `iterations` split into
 /// `reweights` + 1 equal stages (the CPU's and the GPU's stage boundaries alike).
 pub fn reweights_before(it: usize, iterations: usize, reweights: usize) -> bool {
@@ -1597,6 +1627,50 @@ mod tests {
         assert!(last < 1e-3 * first, "γ {relaxation}: {last} vs {first}");
         let obj = j.objective(&mut st);
         assert!(obj.is_finite() && obj > 0.0);
+    }
+
+    /// The rebalance before the second of two iterations takes τ and σ from that iterate's
+    /// mean |α| (τ = ratio·s·√(τσ‖K‖²)/‖K‖, s = mean|α|/λ) and keeps ᾱ and the duals; without
+    /// it the run keeps the seed's steps.
+    #[test]
+    fn the_rebalance_takes_the_steps_from_the_iterate_halfway() {
+        let j = solver(32, 1.0, JointConfig::default());
+        let t = truth(32, 32);
+        let y = frame_of(&j, &t);
+        let seed = flat_seed(&t);
+        let mut st = j.start(&y, &seed, None).unwrap();
+        let start_tau = st.tau;
+        j.step_untraced(&mut st);
+        let mean = st.alpha.iter().map(|v| v.abs() as f64).sum::<f64>() / st.alpha.len() as f64;
+        let scale = mean / st.lambda as f64;
+        let (tau, sigma) = (
+            scale * STEP_PRODUCT.sqrt() / j.norm_k,
+            STEP_PRODUCT.sqrt() / (scale * j.norm_k),
+        );
+        let (bar, qx) = (st.bar.clone(), st.qx.clone());
+        let lambda = st.lambda as f64;
+        j.balance_steps(&mut st, lambda).unwrap();
+        assert!(
+            (st.tau as f64 / tau - 1.0).abs() < 1e-6,
+            "τ {} against {tau}",
+            st.tau
+        );
+        assert!((st.sigma as f64 / sigma - 1.0).abs() < 1e-6);
+        assert!(
+            (st.tau / start_tau - 1.0).abs() > 1e-2,
+            "one step must move mean|α|"
+        );
+        assert_eq!((st.bar.clone(), st.qx.clone()), (bar, qx));
+        let mut run = j.start(&y, &seed, None).unwrap();
+        let stages = |rebalance| Stages {
+            reweights: 0,
+            rebalance,
+        };
+        j.iterate(&mut run, 2, stages(true)).unwrap();
+        assert_eq!(run.tau, st.tau);
+        let mut fixed = j.start(&y, &seed, None).unwrap();
+        j.iterate(&mut fixed, 2, stages(false)).unwrap();
+        assert_eq!(fixed.tau, start_tau);
     }
 
     /// Reweighting by hand: on 8 × 8, α₀ = 1 left of x = 4 and 3 from there (other coefficients

@@ -10,14 +10,14 @@ use crate::context::{linear_groups, GpuContext, Launch};
 use crate::error::{GpuError, Result};
 use crate::gap;
 use crate::mix::GpuMix;
-use specmux_core::joint::{reweights_before, Joint, JointStats, SpectralPrior};
+use specmux_core::joint::{rebalances_before, reweights_before, Joint, JointStats, SpectralPrior};
 use specmux_core::Cube;
 
 /// Threads per workgroup of shaders/joint.wgsl.
 const WORKGROUP: u32 = 256;
 
 /// Words before M in the per-frame scalars (shaders/joint.wgsl's `sc`): the list count,
-/// mean|y|, mean|α₀|, λ, τ, σ and two unused.
+/// mean|y|, one unused, λ, τ, σ and two unused.
 const SCALARS: usize = 8;
 
 /// The `Params` struct of shaders/joint.wgsl.
@@ -64,11 +64,15 @@ pub struct GpuJoint {
     spectral_prior: SpectralPrior,
     /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
     reweights: usize,
+    /// Whether the steps are rebalanced halfway (`rebalance`).
+    rebalances: bool,
     j: usize,
     nbp: usize,
     npx: usize,
     /// Σ|y| and Σ|α₀| (two sums each), the scalars and M, the tables and the state's start.
     start: Vec<Launch>,
+    /// Σ|α| (two sums), the scalars and M again, the tables for the new τ.
+    rebalance: Vec<Launch>,
     dual: Launch,
     /// Σ of the pixel costs appended to the objective list.
     cost_sum: [Launch; 2],
@@ -129,24 +133,26 @@ impl GpuJoint {
             (5, &b.state),
         ];
         let gm = gap::module(ctx);
-        let mean = |input, planes: usize| {
+        let mean = |input, planes: usize, list| {
             let scale = 1.0 / (npx * planes) as f64;
-            gap::abs_sum(
-                ctx,
-                &gm,
-                input,
-                (npx, planes),
-                scale,
-                &b.partials,
-                &b.scalars,
+            gap::abs_sum(ctx, &gm, input, (npx, planes), scale, &b.partials, list)
+        };
+        let setup = || {
+            launch(
+                "setup",
+                &[(1, &b.rig), (3, &b.scalars), (11, &b.bal)],
+                [1, 1, 1],
             )
         };
-        let mut start: Vec<Launch> = mean(frame, 1)
+        let mut start: Vec<Launch> = mean(frame, 1, &b.scalars)
             .into_iter()
-            .chain(mean(&b.state, j))
+            .chain(mean(&b.state, j, &b.bal))
             .collect();
-        start.push(launch("setup", &[(1, &b.rig), (3, &b.scalars)], [1, 1, 1]));
+        start.push(setup());
         start.push(launch("tables", &joined(&common, &[(6, &b.r)]), pixels));
+        let mut rebalance: Vec<Launch> = mean(&b.state, j, &b.bal).into_iter().collect();
+        rebalance.push(setup());
+        rebalance.push(launch("retable", &common[..4], pixels));
         let mut reweight = vec![launch("grad_norm", &[(5, &b.state), (7, &b.cost)], pixels)];
         let scale = 1.0 / npx as f64;
         reweight.extend(gap::abs_sum(
@@ -173,10 +179,12 @@ impl GpuJoint {
             relaxation: t.config.relaxation,
             spectral_prior: t.config.spectral_prior,
             reweights: t.config.reweight_rounds,
+            rebalances: t.config.rebalance,
             j,
             nbp: t.padded_bands,
             npx,
             start,
+            rebalance,
             dual: launch("dual", &joined(&common, &[(6, &b.r), (7, &b.cost)]), pixels),
             cost_sum: gap::abs_sum(ctx, &gm, &b.cost, (npx, 1), 1.0, &b.partials, &b.objective),
             primal: launch(
@@ -251,13 +259,17 @@ impl GpuJoint {
         self.channels.output()
     }
 
-    /// Record a whole run from the seed: start, `iterations` steps (the TV weights refreshed
-    /// between the stages of reweighted TV, as on the CPU), `encode_finish`.
+    /// Record a whole run from the seed: start, `iterations` steps (the steps rebalanced
+    /// halfway and the TV weights refreshed between the stages of reweighted TV, as on the
+    /// CPU), `encode_finish`.
     pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
         self.encode_start(enc);
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
             for it in 0..self.iterations {
+                if self.rebalances && rebalances_before(it, self.iterations) {
+                    self.rebalance.iter().for_each(|l| l.record(&mut cp));
+                }
                 if reweights_before(it, self.iterations, self.reweights) {
                     self.reweight.iter().for_each(|l| l.record(&mut cp));
                 }
@@ -277,6 +289,7 @@ impl GpuJoint {
             &self.b.extremes,
             &self.b.counter,
             &self.b.rw,
+            &self.b.bal,
         ] {
             enc.clear_buffer(b, 0, None);
         }
@@ -400,6 +413,8 @@ struct Buffers {
     partials: wgpu::Buffer,
     /// The reweighting's means of ‖∇α‖: a count, then one value per refresh.
     rw: wgpu::Buffer,
+    /// The means of |α| the steps are balanced by: a count, the seed's, the rebalance's.
+    bal: wgpu::Buffer,
 }
 
 impl Buffers {
@@ -424,6 +439,7 @@ impl Buffers {
                 "joint reweight means",
                 4 * (t.config.reweight_rounds as u64 + 2),
             ),
+            bal: ctx.storage("joint alpha means", 4 * 3),
         }
     }
 }

@@ -3,7 +3,8 @@
 //! seed), the primal step after it (α, ᾱ), 30 iterations with per-pixel weights ω (α, the
 //! objective after every step, the cube diag(g)·Bα clipped at zero and its violation, the
 //! channels Fα), a run without the objective's trace (its two values), a reweighted TV run (α
-//! and the objective after every step), and the non-finite check. The problem: 24 × 20 pixels (not square, so a
+//! and the objective after every step), a run with its steps rebalanced halfway (α, τ, σ), and
+//! the non-finite check. The problem: 24 × 20 pixels (not square, so a
 //! swapped axis shows), six sinusoidal patterns, J = 4 cosines over 13 bands (padded to 16:
 //! the padding's lanes are exercised), a seed with noise that leaves a third of the pixels
 //! infeasible so the constraint's dual is active.
@@ -247,7 +248,12 @@ fn start_dual_and_primal_steps_match_the_core() {
 fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
     let Some(ctx) = common::context() else { return };
     let iterations = 30;
-    let joint = solver(iterations);
+    // Step by step on the CPU, so without the run's mid-run rebalance (tested on its own below).
+    let stepwise = JointConfig {
+        rebalance: false,
+        ..config(iterations)
+    };
+    let joint = solver_with(&stepwise, 1.0);
     let (frame, seed) = problem(&joint);
     let omega: Vec<f32> = common::noise(W * H, 3)
         .iter()
@@ -357,6 +363,41 @@ fn a_reweighted_run_matches_the_core() {
     eprintln!("reweighted α after 30 iterations: relative L2 {e:.2e}");
     assert!(e < 1e-4, "α: {e:.2e}");
     assert_eq!(stats.objective.len(), cpu.objective.len());
+    for (got, want) in stats.objective.iter().zip(&cpu.objective) {
+        assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
+    }
+}
+
+/// The steps rebalanced halfway (the default): the GPU's mean |α| at iteration 15, its τ, σ
+/// and tables follow the CPU's, and the run differs from one without the rebalance.
+#[test]
+fn a_rebalanced_run_matches_the_core() {
+    let Some(ctx) = common::context() else { return };
+    let joint = solver(30);
+    let (frame, seed) = problem(&joint);
+    let (alpha, cpu) = joint.run(&frame, &seed, None).unwrap();
+    let fixed = JointConfig {
+        rebalance: false,
+        ..config(30)
+    };
+    let (unbalanced, before) = solver_with(&fixed, 1.0).run(&frame, &seed, None).unwrap();
+    assert!(
+        rel(&unbalanced.data, &alpha.data) > 1e-3
+            && (cpu.steps[0] / before.steps[0] - 1.0).abs() > 1e-2,
+        "the rebalance must change the steps and the run: τ {:?} against {:?}",
+        cpu.steps,
+        before.steps
+    );
+    let (gpu, stats) = gpu_run(&ctx, &joint, &frame, &seed);
+    let e = rel(&gpu, &alpha.data);
+    eprintln!("rebalanced α after 30 iterations: relative L2 {e:.2e}");
+    assert!(e < 1e-4, "α: {e:.2e}");
+    for (got, want) in stats.steps.iter().zip(&cpu.steps) {
+        assert!(
+            ((got - want) / want).abs() < 1e-6,
+            "step {got} against {want}"
+        );
+    }
     for (got, want) in stats.objective.iter().zip(&cpu.objective) {
         assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
     }

@@ -33,7 +33,12 @@ pub fn choose(j: &Joint, st: &mut JointState) -> Result<Search> {
     let lambda0 = st.lambda as f64;
     let search = secant(lambda0, |lambda| {
         j.set_lambda(st, lambda)?;
-        j.iterate(st, j.cfg.search_iterations, 0)?;
+        // Each trial's `set_lambda` balances the steps already: no stages within a trial.
+        let stages = super::Stages {
+            reweights: 0,
+            rebalance: false,
+        };
+        j.iterate(st, j.cfg.search_iterations, stages)?;
         let (sum, n) = j.weighted_residual(st);
         if n == 0 {
             return Err(Error::Numerical(

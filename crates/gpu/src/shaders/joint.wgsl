@@ -30,7 +30,7 @@ const LANES: u32 = 8u;
 
 // `rig`, per rig: a (J planes) | βB by columns (J × NBP) | column minima (J) | maxima (J) |
 // η'Q (J × J, row-major) | its eigenvectors (J × J, column i the i-th) | eigenvalues (J).
-// `sc`, per frame: [count, mean|y|, mean|α₀|] (a list the sums append to), λ, τ, σ, –, –,
+// `sc`, per frame: [count, mean|y|] (a list the sum appends to), –, λ, τ, σ, –, –,
 // then M = (I + τη'Q)⁻¹ (J × J, column-major as on the CPU).
 // `tab`, per frame: m = M a (J planes) | t = τωy | c = τω/(1 + τω aᵀm) | k = aᵀm | ω | the TV
 // weight w (1 unless reweighted).
@@ -48,6 +48,8 @@ const LANES: u32 = 8u;
 @group(0) @binding(9) var<storage, read_write> extremes: array<atomic<u32>, 2>;
 // The reweighting's list of mean ‖∇α‖ (a count, then the values the sums append).
 @group(0) @binding(10) var<storage, read> rw: array<f32>;
+// The means of |α| the steps are balanced by (a count, then the seed's and the rebalance's).
+@group(0) @binding(11) var<storage, read> bal: array<f32>;
 
 const SC_LAMBDA: u32 = 3u;
 const SC_TAU: u32 = 4u;
@@ -94,7 +96,7 @@ fn linear(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
 @compute @workgroup_size(1)
 fn setup() {
     let lambda = prm.lambda_per_y * sc[1];
-    let mean_alpha = sc[2];
+    let mean_alpha = bal[bitcast<u32>(bal[0])];
     var scale = 1.0;
     if lambda > 0.0 && mean_alpha > 0.0 {
         scale = mean_alpha / lambda;
@@ -127,14 +129,8 @@ fn mat_vec(v: array<f32, J>) -> array<f32, J> {
     return out;
 }
 
-// ---- tables (per pixel): m = M a_p, k = a_pᵀm, t = τωy, c = τω/(1 + τωk); and the state's
-// start: ᾱ = α (the seed), q = 0, r = 0, not active.
-@compute @workgroup_size(256)
-fn tables(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
-    let p = linear(gid, nwg);
-    if p >= prm.npx {
-        return;
-    }
+// m = M a_p, k = a_pᵀm, t = τωy, c = τω/(1 + τωk) at pixel p (the CPU's `prox_tables`).
+fn prox_tables(p: u32) {
     var ap: array<f32, J>;
     for (var j = 0u; j < J; j++) {
         ap[j] = rig[at(j, p)];
@@ -144,18 +140,41 @@ fn tables(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
     for (var j = 0u; j < J; j++) {
         k += ap[j] * m[j];
         tab[at(j, p)] = m[j];
-        st[at(BAR + j, p)] = st[at(ALPHA + j, p)];
-        st[at(QX + j, p)] = 0.0;
-        st[at(QY + j, p)] = 0.0;
     }
     let tw = sc[SC_TAU] * tab[at(J + 3u, p)];
     tab[at(J, p)] = tw * y[p];
     tab[at(J + 1u, p)] = tw / (1.0 + tw * k);
     tab[at(J + 2u, p)] = k;
+}
+
+// ---- tables (per pixel): the proximal tables and the state's start: ᾱ = α (the seed),
+// q = 0, r = 0, not active, the TV weight 1.
+@compute @workgroup_size(256)
+fn tables(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    prox_tables(p);
+    for (var j = 0u; j < J; j++) {
+        st[at(BAR + j, p)] = st[at(ALPHA + j, p)];
+        st[at(QX + j, p)] = 0.0;
+        st[at(QY + j, p)] = 0.0;
+    }
     tab[at(TVW, p)] = 1.0;
     for (var b = 0u; b <= NBP; b++) {
         r[at(b, p)] = 0.0;
     }
+}
+
+// ---- retable (per pixel): the proximal tables for a rebalanced τ, the state kept.
+@compute @workgroup_size(256)
+fn retable(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    prox_tables(p);
 }
 
 // Forward differences of plane `plane` at pixel p = (x, row), 0 across the last column and row.
