@@ -248,12 +248,7 @@ fn start_dual_and_primal_steps_match_the_core() {
 fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
     let Some(ctx) = common::context() else { return };
     let iterations = 30;
-    // Step by step on the CPU, so without the run's mid-run rebalance (tested on its own below).
-    let stepwise = JointConfig {
-        rebalance: false,
-        ..config(iterations)
-    };
-    let joint = solver_with(&stepwise, 1.0);
+    let joint = solver(iterations);
     let (frame, seed) = problem(&joint);
     let omega: Vec<f32> = common::noise(W * H, 3)
         .iter()
@@ -368,19 +363,19 @@ fn a_reweighted_run_matches_the_core() {
     }
 }
 
-/// The steps rebalanced halfway (the default): the GPU's mean |α| at iteration 15, its τ, σ
+/// The steps rebalanced halfway (`rebalance`): the GPU's mean |α| at iteration 15, its τ, σ
 /// and tables follow the CPU's, and the run differs from one without the rebalance.
 #[test]
 fn a_rebalanced_run_matches_the_core() {
     let Some(ctx) = common::context() else { return };
-    let joint = solver(30);
-    let (frame, seed) = problem(&joint);
-    let (alpha, cpu) = joint.run(&frame, &seed, None).unwrap();
-    let fixed = JointConfig {
-        rebalance: false,
+    let rebalanced = JointConfig {
+        rebalance: true,
         ..config(30)
     };
-    let (unbalanced, before) = solver_with(&fixed, 1.0).run(&frame, &seed, None).unwrap();
+    let joint = solver_with(&rebalanced, 1.0);
+    let (frame, seed) = problem(&joint);
+    let (alpha, cpu) = joint.run(&frame, &seed, None).unwrap();
+    let (unbalanced, before) = solver(30).run(&frame, &seed, None).unwrap();
     assert!(
         rel(&unbalanced.data, &alpha.data) > 1e-3
             && (cpu.steps[0] / before.steps[0] - 1.0).abs() > 1e-2,
