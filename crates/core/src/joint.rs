@@ -1300,8 +1300,8 @@ fn prox_pixel<const J: usize>(
     out
 }
 
-/// What happens between the iterations of a run (`Joint::iterate`).
-#[derive(Clone, Copy, Debug)]
+/// What happens between the iterations of a run (`Joint::iterate`); the default: nothing.
+#[derive(Clone, Copy, Debug, Default)]
 struct Stages {
     /// TV reweightings, splitting the run into `reweights` + 1 equal stages.
     reweights: usize,
@@ -1662,14 +1662,14 @@ mod tests {
         );
         assert_eq!((st.bar.clone(), st.qx.clone()), (bar, qx));
         let mut run = j.start(&y, &seed, None).unwrap();
-        let stages = |rebalance| Stages {
-            reweights: 0,
-            rebalance,
+        let rebalanced = Stages {
+            rebalance: true,
+            ..Stages::default()
         };
-        j.iterate(&mut run, 2, stages(true)).unwrap();
+        j.iterate(&mut run, 2, rebalanced).unwrap();
         assert_eq!(run.tau, st.tau);
         let mut fixed = j.start(&y, &seed, None).unwrap();
-        j.iterate(&mut fixed, 2, stages(false)).unwrap();
+        j.iterate(&mut fixed, 2, Stages::default()).unwrap();
         assert_eq!(fixed.tau, start_tau);
     }
 

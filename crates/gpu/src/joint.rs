@@ -64,14 +64,13 @@ pub struct GpuJoint {
     spectral_prior: SpectralPrior,
     /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
     reweights: usize,
-    /// Whether the steps are rebalanced halfway (`rebalance`).
-    rebalances: bool,
     j: usize,
     nbp: usize,
     npx: usize,
     /// Σ|y| and Σ|α₀| (two sums each), the scalars and M, the tables and the state's start.
     start: Vec<Launch>,
-    /// Σ|α| (two sums), the scalars and M again, the tables for the new τ.
+    /// Σ|α| (two sums), the scalars and M again, the tables for the new τ; empty when
+    /// `rebalance` is off.
     rebalance: Vec<Launch>,
     dual: Launch,
     /// Σ of the pixel costs appended to the objective list.
@@ -150,9 +149,12 @@ impl GpuJoint {
             .collect();
         start.push(setup());
         start.push(launch("tables", &joined(&common, &[(6, &b.r)]), pixels));
-        let mut rebalance: Vec<Launch> = mean(&b.state, j, &b.bal).into_iter().collect();
-        rebalance.push(setup());
-        rebalance.push(launch("retable", &common[..4], pixels));
+        let mut rebalance: Vec<Launch> = Vec::new();
+        if t.config.rebalance {
+            rebalance.extend(mean(&b.state, j, &b.bal));
+            rebalance.push(setup());
+            rebalance.push(launch("retable", &common[..4], pixels));
+        }
         let mut reweight = vec![launch("grad_norm", &[(5, &b.state), (7, &b.cost)], pixels)];
         let scale = 1.0 / npx as f64;
         reweight.extend(gap::abs_sum(
@@ -179,7 +181,6 @@ impl GpuJoint {
             relaxation: t.config.relaxation,
             spectral_prior: t.config.spectral_prior,
             reweights: t.config.reweight_rounds,
-            rebalances: t.config.rebalance,
             j,
             nbp: t.padded_bands,
             npx,
@@ -267,7 +268,7 @@ impl GpuJoint {
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
             for it in 0..self.iterations {
-                if self.rebalances && rebalances_before(it, self.iterations) {
+                if rebalances_before(it, self.iterations) {
                     self.rebalance.iter().for_each(|l| l.record(&mut cp));
                 }
                 if reweights_before(it, self.iterations, self.reweights) {

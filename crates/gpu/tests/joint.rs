@@ -33,7 +33,7 @@ mod common;
 
 use nalgebra::DMatrix;
 use specmux_core::carriers::default_layout;
-use specmux_core::joint::{Joint, JointConfig, SpectralPrior};
+use specmux_core::joint::{Joint, JointConfig, JointStats, SpectralPrior};
 use specmux_core::noise::DataWeights;
 use specmux_core::unmix::curvature;
 use specmux_core::Cube;
@@ -148,15 +148,25 @@ fn gpu_solver(
 }
 
 /// A whole GPU run of `joint` from `seed` on `frame` (gains 1): its α (plane-major) and stats.
-fn gpu_run(
-    ctx: &GpuContext,
-    joint: &Joint,
-    frame: &Cube,
-    seed: &Cube,
-) -> (Vec<f32>, specmux_core::joint::JointStats) {
+fn gpu_run(ctx: &GpuContext, joint: &Joint, frame: &Cube, seed: &Cube) -> (Vec<f32>, JointStats) {
     let (g, _) = gpu_solver(ctx, joint, frame, seed, &[1.0; BANDS]);
     submit(ctx, |enc| g.encode(enc));
     (g.state(ctx).unwrap().alpha, g.stats(ctx).unwrap())
+}
+
+/// The GPU's run against the CPU's (`what` names it): α and every objective value within the
+/// 30-iteration tolerance (1e-4 relative), the same number of objective values.
+fn assert_matches_core(what: &str, gpu: (&[f32], &JointStats), cpu: (&Cube, &JointStats)) {
+    let e = rel(gpu.0, &cpu.0.data);
+    eprintln!("{what}, α after 30 iterations: relative L2 {e:.2e}");
+    assert!(e < 1e-4, "{what} α: {e:.2e}");
+    assert_eq!(gpu.1.objective.len(), cpu.1.objective.len());
+    for (got, want) in gpu.1.objective.iter().zip(&cpu.1.objective) {
+        assert!(
+            ((got - want) / want).abs() < 1e-4,
+            "{what}: {got} against {want}"
+        );
+    }
 }
 
 fn submit(ctx: &GpuContext, f: impl FnOnce(&mut wgpu::CommandEncoder)) {
@@ -354,13 +364,7 @@ fn a_reweighted_run_matches_the_core() {
         "the reweighting must change the run"
     );
     let (gpu, stats) = gpu_run(&ctx, &joint, &frame, &seed);
-    let e = rel(&gpu, &alpha.data);
-    eprintln!("reweighted α after 30 iterations: relative L2 {e:.2e}");
-    assert!(e < 1e-4, "α: {e:.2e}");
-    assert_eq!(stats.objective.len(), cpu.objective.len());
-    for (got, want) in stats.objective.iter().zip(&cpu.objective) {
-        assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
-    }
+    assert_matches_core("reweighted", (&gpu, &stats), (&alpha, &cpu));
 }
 
 /// The steps rebalanced halfway (`rebalance`): the GPU's mean |α| at iteration 15, its τ, σ
@@ -384,17 +388,12 @@ fn a_rebalanced_run_matches_the_core() {
         before.steps
     );
     let (gpu, stats) = gpu_run(&ctx, &joint, &frame, &seed);
-    let e = rel(&gpu, &alpha.data);
-    eprintln!("rebalanced α after 30 iterations: relative L2 {e:.2e}");
-    assert!(e < 1e-4, "α: {e:.2e}");
+    assert_matches_core("rebalanced", (&gpu, &stats), (&alpha, &cpu));
     for (got, want) in stats.steps.iter().zip(&cpu.steps) {
         assert!(
             ((got - want) / want).abs() < 1e-6,
             "step {got} against {want}"
         );
-    }
-    for (got, want) in stats.objective.iter().zip(&cpu.objective) {
-        assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
     }
 }
 
@@ -418,14 +417,7 @@ fn a_diagonal_spectral_prior_matches_the_core() {
         "the prior must change the run"
     );
     let (gpu, stats) = gpu_run(&ctx, &joint, &frame, &seed);
-    let e = rel(&gpu, &alpha.data);
-    eprintln!("diagonal prior, α after 30 iterations: relative L2 {e:.2e}");
-    assert!(e < 1e-4, "α: {e:.2e}");
-    let (got, want) = (
-        stats.objective.last().unwrap(),
-        cpu.objective.last().unwrap(),
-    );
-    assert!(((got - want) / want).abs() < 1e-4, "{got} against {want}");
+    assert_matches_core("diagonal prior", (&gpu, &stats), (&alpha, &cpu));
     assert_eq!(
         (stats.spectral_prior.as_str(), cpu.spectral_prior.as_str()),
         ("trained", "trained")

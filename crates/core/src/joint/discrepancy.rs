@@ -34,11 +34,7 @@ pub fn choose(j: &Joint, st: &mut JointState) -> Result<Search> {
     let search = secant(lambda0, |lambda| {
         j.set_lambda(st, lambda)?;
         // Each trial's `set_lambda` balances the steps already: no stages within a trial.
-        let stages = super::Stages {
-            reweights: 0,
-            rebalance: false,
-        };
-        j.iterate(st, j.cfg.search_iterations, stages)?;
+        j.iterate(st, j.cfg.search_iterations, super::Stages::default())?;
         let (sum, n) = j.weighted_residual(st);
         if n == 0 {
             return Err(Error::Numerical(
