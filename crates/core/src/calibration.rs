@@ -215,9 +215,10 @@ fn measure_carrier(
     };
     // The periodic Hann window's mean is ¼: dividing by it gives the tone's amplitude.
     let a = dtft_at(&tapered, w, h, fx, fy) * 4.0;
-    if !(a.norm() > 1e-6 * white_level.abs().max(f64::MIN_POSITIVE)) {
+    let floor = 1e-6 * white_level.abs().max(f64::MIN_POSITIVE);
+    if a.norm().is_nan() || a.norm() <= floor {
         return Err(Error::Numerical(format!(
-            "calibration: pattern {k}'s capture carries no carrier near ({}, {}) cycles/px              (amplitude {:.3e} against a white level {white_level:.3e}); it cannot be demultiplexed",
+            "calibration: pattern {k}'s capture carries no carrier near ({}, {}) cycles/px (amplitude {:.3e} against a white level {white_level:.3e}); it cannot be demultiplexed",
             design.fx,
             design.fy,
             a.norm()

@@ -467,7 +467,7 @@ pub const MAX_SYSTEM_CONDITION: f64 = 1e8;
 pub fn unmixer(cfg: &ReconConfig, design: &Design) -> Result<Unmixer> {
     let sv = design.system.clone().svd(false, false).singular_values;
     let cond = sv.max() / sv.min();
-    if !(cond <= MAX_SYSTEM_CONDITION) {
+    if cond.is_nan() || cond > MAX_SYSTEM_CONDITION {
         return Err(Error::Numerical(format!(
             "the filters do not separate the {} basis vectors: the system matrix F has condition \
              number {cond:.2e} > {MAX_SYSTEM_CONDITION:.0e} (two filters alike, or fewer distinct filters than reconstruct.basis)",
@@ -539,11 +539,11 @@ fn in_exposed_units(measured: &[MeasuredCarrier], exposed_white: &[f64]) -> Vec<
         .collect()
 }
 
+/// The demixing matrix M (None without weights) and the white level z(white) of each pattern.
+type Demixing = (Option<Vec<Vec<f64>>>, Vec<f64>);
+
 /// M = (Wᵀ)⁻¹ (None without weights) and z(white) = Wᵀ white (= white without weights).
-fn demixing(
-    white: &[f64],
-    weights: Option<&Vec<Vec<f64>>>,
-) -> Result<(Option<Vec<Vec<f64>>>, Vec<f64>)> {
+fn demixing(white: &[f64], weights: Option<&Vec<Vec<f64>>>) -> Result<Demixing> {
     let n = white.len();
     let Some(w) = weights else {
         return Ok((None, white.to_vec()));
@@ -559,7 +559,7 @@ fn demixing(
     let zw: Vec<f64> = (0..n)
         .map(|k| (0..n).map(|i| w[i][k] * white[i]).sum())
         .collect();
-    if let Some(k) = zw.iter().position(|v| !(*v > 0.0)) {
+    if let Some(k) = zw.iter().position(|v| v.is_nan() || *v <= 0.0) {
         return Err(Error::Numerical(format!(
             "pattern {k} sees no white light through the exposure weights (Σ_i w_ik·white_i = {})",
             zw[k]

@@ -69,7 +69,10 @@ fn dark_channel(
     wheel: &ColorWheel,
     p: &Projection,
 ) -> Result<()> {
-    let Some(i) = p.w.row_iter().position(|r| !(r.sum() > 0.0)) else {
+    let Some(i) =
+        p.w.row_iter()
+            .position(|r| r.sum().is_nan() || r.sum() <= 0.0)
+    else {
         return Ok(());
     };
     let span = format!("{}–{} nm", grid.start_nm, grid.end_nm());

@@ -217,7 +217,7 @@ fn grid_of_channels(names: &[String], path: &Path) -> Result<[f64; 3]> {
     let step = (wl[wl.len() - 1] - wl[0]) / (wl.len() - 1) as f64;
     for (k, (n, &v)) in names.iter().zip(&wl).enumerate() {
         let want = wl[0] + k as f64 * step;
-        if !(step > 0.0) || (v - want).abs() > 1e-3 * step.abs().max(1.0) {
+        if step.is_nan() || step <= 0.0 || (v - want).abs() > 1e-3 * step.abs().max(1.0) {
             return Err(err(format!(
                 "channel `{n}` ({v} nm) is off a uniform grid {} to {} nm (band {k} would be {want} nm); channels sort by name, so zero-pad them (0400.0nm)",
                 wl[0],
