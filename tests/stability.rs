@@ -65,7 +65,7 @@ fn finite(case: &str, rep: &RunReport) {
             r.psnr_db.is_finite() && r.ssim.is_finite() && r.nrmse.is_finite(),
             "{case}: {r:?}"
         );
-        assert!(r.sam_deg.is_none_or(f64::is_finite), "{case}: {r:?}");
+        assert!(r.sam_deg.map_or(true, f64::is_finite), "{case}: {r:?}");
     }
     let u = rep.results.iter().find(|r| r.stage == "unmix").unwrap();
     let warn = if rep.warnings.is_empty() {
@@ -730,7 +730,7 @@ fn cli_a_killed_run_leaves_no_file_under_the_final_names() {
     let writing = loop {
         let staged = std::fs::read_dir(&d).unwrap().flatten().any(|e| {
             e.file_name().to_string_lossy().contains(".staging-")
-                && std::fs::read_dir(e.path()).map_or(false, |mut r| r.next().is_some())
+                && std::fs::read_dir(e.path()).is_ok_and(|mut r| r.next().is_some())
         });
         if staged || t.elapsed().as_secs() > 120 {
             break staged;
