@@ -198,6 +198,14 @@ impl JointConfig {
                 "applies to prior = \"tv\" only (plug-and-play has no TV weights)",
             ));
         }
+        if self.prior == Prior::Pnp && self.rebalance {
+            return Err(Error::config(
+                file,
+                &key("rebalance"),
+                true,
+                "applies to prior = \"tv\" only (plug-and-play's ADMM has no Chambolle–Pock steps to rebalance)",
+            ));
+        }
         if self.weight_rule == WeightRule::Discrepancy {
             if self.prior == Prior::Pnp {
                 return Err(Error::config(
@@ -2024,9 +2032,17 @@ mod tests {
                 JointConfig {
                     prior: Prior::Pnp,
                     reweight_rounds: 2,
-                    ..cfg
+                    ..cfg.clone()
                 },
                 "`reconstruct.joint.reweight_rounds` = 2:",
+            ),
+            (
+                JointConfig {
+                    prior: Prior::Pnp,
+                    rebalance: true,
+                    ..cfg
+                },
+                "`reconstruct.joint.rebalance` = true:",
             ),
         ] {
             let e = refusal(&bad);
