@@ -548,6 +548,9 @@ pub fn simulate(
     let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
     let pipeline = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?;
     say!(text, "{}", pipeline.explain());
+    for w in &rig.warnings {
+        say!(text, "warning: {w}");
+    }
     if explain {
         return Ok(text);
     }

@@ -348,6 +348,26 @@ impl Chain {
         )
     }
 
+    /// The patterns whose relay runs on the unpadded grid, each with the blur of its openings
+    /// in mirrors (0.61 / their radius at the longest wavelength): that grid treats the
+    /// modulator as one period of a periodic pattern, so within the blur of its edges the
+    /// pattern is not a finite DMD's (docs/optics.md, "Known defect"). Empty without a filter.
+    pub fn periodic_patterns(&self) -> Result<Vec<(usize, f64)>> {
+        let Some(f) = &self.cfg.fourier_filter else {
+            return Ok(Vec::new());
+        };
+        let m = &self.modulator;
+        let mut out = Vec::new();
+        for (i, (c, light)) in self.carriers.iter().zip(&self.lights).enumerate() {
+            let g = geometry(self.cfg.lens.as_ref(), m, c, self.width, self.height)?;
+            let ap = f.aperture(m.pitch_um, g.fxd, g.fyd, light);
+            if grid(self.cfg.dmd.is_some(), m, &g, &ap, light)?.pad == 1 {
+                out.push((i, 0.61 / ap.at_wavelength(light.support_nm().1).radius));
+            }
+        }
+        Ok(out)
+    }
+
     /// [`dither`] for every pattern.
     pub fn dither(&self) -> Result<Vec<Display>> {
         (0..self.carriers.len())
