@@ -106,8 +106,11 @@ fn reconstruct_on_device(
     }
     let r = recon.run(frame, None)?;
     let [t_demux, t_gap, t_unmix] = r.seconds;
-    let times =
+    let mut times =
         format!("CPU: demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s");
+    if let Some(w) = r.joint.as_ref().and_then(|j| j.warning()) {
+        times += &format!("\nwarning: {w}");
+    }
     Ok((r.cube, r.unmix, times))
 }
 

@@ -259,7 +259,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let report = RunReport {
         provenance: Provenance::new(lib),
-        warnings: warnings(&rig, &frame, &results),
+        warnings: warnings(&rig, &frame, out.joint.as_ref(), &results),
         frame,
         results,
         experiment: exp.file.clone(),
@@ -288,8 +288,13 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     Ok((report, data))
 }
 
-/// The rig's warnings, then every result row's flags, named by its stage.
-fn warnings(rig: &Rig, frame: &FrameStats, results: &[ResultRow]) -> Vec<String> {
+/// The rig's warnings, the frame's, the joint run's, then every result row's flags, named by its stage.
+fn warnings(
+    rig: &Rig,
+    frame: &FrameStats,
+    joint: Option<&specmux_core::joint::JointStats>,
+    results: &[ResultRow],
+) -> Vec<String> {
     let flagged = results.iter().flat_map(|r| {
         r.flags
             .iter()
@@ -299,6 +304,7 @@ fn warnings(rig: &Rig, frame: &FrameStats, results: &[ResultRow]) -> Vec<String>
         .iter()
         .cloned()
         .chain(frame.warning())
+        .chain(joint.and_then(|j| j.warning()))
         .chain(flagged)
         .collect()
 }
