@@ -210,3 +210,19 @@ fn an_iteration_count_beside_the_default_auto_method_is_refused() {
     let (ok, err) = simulate(&d, &toml, None);
     assert!(ok, "{err}");
 }
+
+/// `--size` outside the scene's range is refused as `scene.size` would be, not with the
+/// wavelet's divisibility rule (0 divides by 16).
+#[test]
+fn a_size_outside_the_scene_range_is_refused() {
+    let d = tmpdir("bad-size");
+    for n in ["0", "8", "9000"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_specmux"))
+            .args(["demo", "--size", n, "--out"])
+            .arg(d.join("out"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_one_line_error(out.status.success(), &err, &["--size", n, "16 to 8192"]);
+    }
+}

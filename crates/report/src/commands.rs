@@ -67,6 +67,9 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     if source.contains(':') {
         return refuse(&format!("{source} takes its size from the file"));
     }
+    if !(16..=8192).contains(&n) {
+        return refuse("must be 16 to 8192 pixels (as scene.size)");
+    }
     exp.scene.size = [n, n];
     let gap = &exp.reconstruct.gap;
     if gap.method == specmux_core::gap::Method::Fourier {
