@@ -91,7 +91,7 @@ fn split(n: usize, choose: usize, keep: &[usize]) -> (Vec<usize>, usize) {
 /// Best `top` sets by the paper's criterion, by branch and bound.
 pub fn minimax_correlation(ev: &Evaluator, choose: usize, keep: &[usize], top: usize) -> TopK {
     let (free, need) = split(ev.len(), choose, keep);
-    let mut best = TopK::new(top.max(1));
+    let mut best = TopK::new(top);
     let mut set = keep.to_vec();
     set.sort_unstable();
     let base = ev.max_corr(&set);
@@ -146,7 +146,7 @@ pub fn exhaustive(
     bar: &ProgressBar,
 ) -> Vec<TopK> {
     let (free, need) = split(ev.len(), choose, keep);
-    let empty = || vec![TopK::new(top.max(1)); CRITERIA.len()];
+    let empty = || vec![TopK::new(top); CRITERIA.len()];
     if need == 0 || need > free.len() {
         let mut t = empty();
         if need == 0 {

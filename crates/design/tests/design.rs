@@ -127,6 +127,33 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
         experiment: None,
         out: dir.join("out"),
     };
+    // A count or a light level out of range is refused by its option, before any search.
+    for (bad, flag) in [
+        (
+            FilterArgs {
+                top: 0,
+                ..a.clone()
+            },
+            "--top: `top` = 0",
+        ),
+        (
+            FilterArgs {
+                electrons: f64::NAN,
+                ..a.clone()
+            },
+            "--electrons: `electrons` = NaN",
+        ),
+        (
+            FilterArgs {
+                choose: 0,
+                ..a.clone()
+            },
+            "--choose: `choose` = 0",
+        ),
+    ] {
+        let e = filters::run(&bad, &lib).unwrap_err().to_string();
+        assert!(e.contains(flag), "{e}");
+    }
     let text = filters::run(&a, &lib).unwrap();
     assert!(text.contains("462 combinations"), "{text}");
     let wheel = std::fs::read_to_string(dir.join("out/wheel.toml")).unwrap();
