@@ -223,6 +223,14 @@ fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
             "must be in [0, 1]",
         ));
     }
+    if !(1..=100).contains(&a.candidates) {
+        return Err(Error::config(
+            "--candidates",
+            "candidates",
+            a.candidates,
+            "must be 1 to 100 designed layouts per crop",
+        ));
+    }
     if j == 0 || j > 16 {
         return Err(Error::config(
             "--carriers",

@@ -166,3 +166,54 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
     assert_eq!(rig.wheel.filters.len(), 6);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Counts and fractions out of range are refused by their option before any work (zero
+/// candidates used to end in a misleading "no feasible layout … relax the guard").
+#[test]
+fn carrier_options_out_of_range_are_refused_by_name() {
+    let lib = Library::default_root();
+    let base = carrier_args(temp("c-bad"));
+    for (bad, flag) in [
+        (
+            CarrierArgs {
+                candidates: 0,
+                ..base.clone()
+            },
+            "--candidates: `candidates` = 0",
+        ),
+        (
+            CarrierArgs {
+                size: 8,
+                ..base.clone()
+            },
+            "--size: `size` = 8",
+        ),
+        (
+            CarrierArgs {
+                crop: vec![0.2, 0.7],
+                ..base.clone()
+            },
+            "--crop: `crop` = 0.7",
+        ),
+        (
+            CarrierArgs {
+                harmonic: f64::NAN,
+                ..base.clone()
+            },
+            "--harmonic: `harmonic` = NaN",
+        ),
+        (
+            CarrierArgs {
+                carriers: Some(17),
+                ..base.clone()
+            },
+            "--carriers: `carriers` = 17",
+        ),
+    ] {
+        let e = match carriers::design(&bad, &lib) {
+            Ok(_) => panic!("{flag}: accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains(flag), "{e}");
+    }
+}
