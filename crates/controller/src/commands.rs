@@ -156,14 +156,29 @@ impl Sink for Rehearsal<'_> {
     }
 }
 
-/// Parse `--fault KIND@N` arguments.
-pub fn faults(specs: &[String]) -> Result<Faults> {
-    Ok(Faults(
-        specs
-            .iter()
-            .map(|s| Fault::parse(s))
-            .collect::<Result<_>>()?,
-    ))
+/// Parse `--fault KIND@N` arguments for a plan of `frames` frames; a fault at an exposure the
+/// plan never reaches is refused (it would pass unnoticed).
+pub fn faults(specs: &[String], frames: usize) -> Result<Faults> {
+    let faults: Vec<Fault> = specs
+        .iter()
+        .map(|s| Fault::parse(s))
+        .collect::<Result<_>>()?;
+    if let Some((spec, f)) = specs
+        .iter()
+        .zip(&faults)
+        .find(|(_, f)| frames > 0 && f.exposure >= frames as u64)
+    {
+        return Err(Error::refused(
+            "--fault",
+            spec,
+            format!(
+                "exposure {} is past the plan's {frames} frames (exposures 0 to {})",
+                f.exposure,
+                frames.saturating_sub(1)
+            ),
+        ));
+    }
+    Ok(Faults(faults))
 }
 
 /// `specmux rehearse`: the plan, its checks and timeline; then (unless a dry run) calibration
@@ -175,7 +190,7 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let exp = Experiment::load(&o.experiment)?;
-    let faults = faults(&o.faults)?;
+    let faults = faults(&o.faults, o.frames)?;
     let (plan, text) = rehearsal_plan(&exp, o.frames, out);
     if o.dry_run {
         return Ok(dry_run(&plan, text));
@@ -352,7 +367,7 @@ fn acquire_in(
     lib: &Library,
 ) -> Result<String> {
     let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
-    let faults = faults(&o.faults)?;
+    let faults = faults(&o.faults, o.frames)?;
     // The real rig is opened (inquiries only) even for a dry run: the plan needs its limits.
     let (real_devices, limits) = match backend {
         "sim" => (None, DeviceLimits::of_twin(&exp)),

@@ -54,6 +54,21 @@ fn a_dry_run_prints_plan_checks_and_timeline_and_writes_nothing() {
     assert!(!out.exists());
 }
 
+/// A fault at an exposure the plan never reaches is refused before anything runs: it would
+/// pass unnoticed and the rehearsal would look fault-tolerant.
+#[test]
+fn a_fault_past_the_plan_is_refused() {
+    let (file, out) = setup("late-fault", "");
+    let faults = vec!["dropped-frame@3".to_string()];
+    let o = RunOptions::new(file, 3, false, faults, Some(out.clone()));
+    let err = rehearse(&o, &common::lib()).unwrap_err();
+    assert!(
+        err.contains("`--fault` = dropped-frame@3") && err.contains("exposures 0 to 2"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn rehearsing_a_moving_scene_reconstructs_every_frame() {
     let (file, out) = setup("moving", "velocity_px_per_s = [200, 0]");
