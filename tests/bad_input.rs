@@ -162,6 +162,22 @@ fn out_of_range_values_in_the_light_path_sections() {
             "0",
         ),
         ("[rig.lens]\nna = 2\n", "rig.lens.na", "2"),
+        // Refused deep in the optical chain, which does not know the file: named at its boundary.
+        (
+            "[rig.dmd]\nwidth = 32\nheight = 32\n",
+            "rig.dmd.width",
+            "32×32 mirrors",
+        ),
+        (
+            "[rig.dmd]\n[rig.fourier_filter]\npinhole_radius_um = 0.001\n",
+            "rig.fourier_filter.pinhole_radius_um",
+            "0.001",
+        ),
+        (
+            "[rig.dmd]\n[rig.fourier_filter]\npinhole_radius_um = 100000\n",
+            "rig.fourier_filter.pinhole_radius_um",
+            "100000",
+        ),
         (
             "[reconstruct]\ncrosstalk_weights = [[1, 0]]\n",
             "reconstruct.crosstalk_weights",

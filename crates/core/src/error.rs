@@ -54,6 +54,10 @@ pub enum Error {
     Interrupted(String),
 }
 
+/// The file a configuration error names where the experiment's file is not known (the twin's
+/// optical chain); [`Error::in_file`] puts the real file in at the boundary that knows it.
+pub const UNNAMED_FILE: &str = "optics";
+
 /// Result alias for the crate.
 pub type Result<T> = std::result::Result<T, Error>;
 
@@ -79,6 +83,25 @@ impl Error {
                 source: Box::new(self),
             },
             named => named,
+        }
+    }
+
+    /// A configuration error raised under [`UNNAMED_FILE`], named by the experiment's `file`;
+    /// every other error unchanged.
+    pub fn in_file(self, file: &str) -> Self {
+        match self {
+            Error::Config {
+                file: f,
+                key,
+                value,
+                reason,
+            } if f == UNNAMED_FILE => Error::Config {
+                file: file.to_string(),
+                key,
+                value,
+                reason,
+            },
+            other => other,
         }
     }
 

@@ -288,7 +288,7 @@ impl JointStats {
     /// plug-and-play the fit to the frame got worse than the Fourier seed's.
     pub fn warning(&self) -> Option<String> {
         let (&first, &last) = (self.objective.first()?, self.objective.last()?);
-        if !(last > first) || self.iterations == 0 {
+        if last.partial_cmp(&first) != Some(std::cmp::Ordering::Greater) || self.iterations == 0 {
             return None;
         }
         let (what, remedy) = match self.prior.as_str() {

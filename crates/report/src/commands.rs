@@ -361,7 +361,8 @@ pub fn patterns(
             rig.height,
             exp.reconstruct.crop,
             radii,
-        )?;
+        )
+        .map_err(|e| e.in_file(&exp.file))?;
         let md = pr::study_table(&rows);
         say!(
             text,
@@ -382,7 +383,8 @@ pub fn patterns(
         rig.width,
         rig.height,
         exp.reconstruct.crop,
-    )?;
+    )
+    .map_err(|e| e.in_file(&exp.file))?;
     for s in &rep.stages {
         say!(text, "{s}");
     }

@@ -81,7 +81,7 @@ pub fn pattern_report(
 ) -> Result<(PatternReport, PatternSet)> {
     if !(crop > 0.0 && crop <= 0.5) {
         return Err(Error::config(
-            "optics",
+            specmux_core::error::UNNAMED_FILE,
             "reconstruct.crop",
             crop,
             "must lie in (0, 0.5]",

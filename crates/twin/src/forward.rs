@@ -147,7 +147,8 @@ impl Pipeline {
                 &rig.pattern_lights(exp)?,
                 rig.width,
                 rig.height,
-            )?
+            )
+            .map_err(|e| e.in_file(&exp.file))?
             .with_pair_summer(pair_summer_for(&device));
             PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
         } else {
@@ -218,6 +219,11 @@ impl Pipeline {
 
     /// Run every stage in order, timing each.
     pub fn run(&self) -> Result<(Simulated, Vec<StageTime>)> {
+        self.run_stages().map_err(|e| e.in_file(&self.scene.file))
+    }
+
+    /// [`Pipeline::run`], its optics' refusals not yet named by the experiment's file.
+    fn run_stages(&self) -> Result<(Simulated, Vec<StageTime>)> {
         let mut times = Vec::new();
         let scene = timed(&mut times, &self.scene, &())?;
         let channels = timed(&mut times, &self.wheel, &scene)?;

@@ -197,14 +197,16 @@ impl Rig {
             return Ok(None);
         };
         let lights = self.pattern_lights(exp)?;
+        let in_file = |e: Error| e.in_file(&exp.file);
         let chain = Chain::new(
             &exp.rig.optics(),
             &self.imaged_carriers,
             &lights,
             self.width,
             self.height,
-        )?;
-        let periodic = chain.periodic_patterns()?;
+        )
+        .map_err(in_file)?;
+        let periodic = chain.periodic_patterns().map_err(in_file)?;
         let Some(blur) = periodic.iter().map(|p| p.1).reduce(f64::max) else {
             return Ok(None);
         };

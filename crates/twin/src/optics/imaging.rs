@@ -30,6 +30,7 @@ use serde::{Deserialize, Serialize};
 use specmux_core::carriers::Carrier;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
+use specmux_core::error::UNNAMED_FILE;
 use specmux_core::fft::{Fft2, HalfSpectrum};
 use specmux_core::spectral::Curve;
 use specmux_core::Cube;
@@ -267,7 +268,7 @@ impl Chain {
         w: usize,
         h: usize,
     ) -> Result<Chain> {
-        cfg.validate("optics")?;
+        cfg.validate(UNNAMED_FILE)?;
         if w < 2 || h < 2 {
             return Err(Error::Shape(format!("sensor {w}×{h}: at least 2×2 pixels")));
         }
@@ -479,7 +480,7 @@ fn geometry(
     });
     if w as f64 / s > wd as f64 + 1e-9 || h as f64 / s > hd as f64 + 1e-9 {
         return Err(Error::config(
-            "optics",
+            UNNAMED_FILE,
             "rig.dmd.width",
             format!("{wd}×{hd} mirrors"),
             &format!("the {w}×{h} sensor sees {:.1}×{:.1} mirrors at {s:.4} pixels per mirror; the DMD must cover it", w as f64 / s, h as f64 / s),
@@ -488,7 +489,7 @@ fn geometry(
     let (fxd, fyd) = (sigma * c.fx * s, sigma * c.fy * s);
     if fxd.abs() > 0.5 + 1e-12 || fyd.abs() > 0.5 + 1e-12 {
         return Err(Error::config(
-            "optics",
+            UNNAMED_FILE,
             "rig.lens.camera_magnification",
             format!("{s:.4} pixels per mirror"),
             &format!("carrier ({}, {}) cycles/pixel is ({fxd:.3}, {fyd:.3}) cycles/mirror, past the DMD's Nyquist limit", c.fx, c.fy),
@@ -624,7 +625,7 @@ fn grid(
     let side = pad * os * wd.max(hd) as f64;
     if !side.is_finite() || side > MAX_GRID as f64 {
         return Err(Error::config(
-            "optics",
+            UNNAMED_FILE,
             "rig.fourier_filter.pinhole_radius_um",
             ap.radius_um,
             &format!(

@@ -15,6 +15,7 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
+use specmux_core::error::UNNAMED_FILE;
 use std::sync::Arc;
 
 /// Most frequency bins the openings may pass over the band: the exact sum runs over their
@@ -171,7 +172,7 @@ pub fn passed_bins(
 
 fn too_many(aperture: &Aperture, n: usize) -> Error {
     Error::config(
-        "optics",
+        UNNAMED_FILE,
         "rig.fourier_filter.pinhole_radius_um",
         aperture.radius_um,
         &format!(
