@@ -228,13 +228,20 @@ fn an_iteration_count_beside_the_default_auto_method_is_refused() {
 }
 
 /// `--size` outside the scene's range is refused as `scene.size` would be, not with the
-/// wavelet's divisibility rule (0 divides by 16).
+/// wavelet's divisibility rule (0 divides by 16); so is the photon-transfer frames' side.
 #[test]
 fn a_size_outside_the_scene_range_is_refused() {
     let d = tmpdir("bad-size");
-    for n in ["0", "8", "9000"] {
+    // `ptc --size 100000` used to abort allocating its frames.
+    for (cmd, n) in [
+        ("demo", "0"),
+        ("demo", "8"),
+        ("demo", "9000"),
+        ("ptc", "0"),
+        ("ptc", "100000"),
+    ] {
         let out = Command::new(env!("CARGO_BIN_EXE_specmux"))
-            .args(["demo", "--size", n, "--out"])
+            .args([cmd, "--size", n, "--out"])
             .arg(d.join("out"))
             .output()
             .unwrap();

@@ -489,6 +489,14 @@ pub fn ptc(
     lib: &Library,
 ) -> Result<String> {
     let mut text = String::new();
+    if !(16..=8192).contains(&size) {
+        return Err(Error::config(
+            "--size",
+            "size",
+            size,
+            "must be 16 to 8192 pixels (the side of the test frames)",
+        ));
+    }
     let cfg = match scene {
         Some(s) => experiment_for(s, None)?.rig.sensor.unwrap_or_default(),
         None => specmux_twin::sensor::SensorConfig::default(),
