@@ -249,3 +249,13 @@ fn a_size_outside_the_scene_range_is_refused() {
         assert_one_line_error(out.status.success(), &err, &["--size", n, "16 to 8192"]);
     }
 }
+
+/// `[compute] device = "gpu"` in a build without the GPU backend is refused by `simulate` and
+/// `demo` as by `bench` and `reconstruct` (it ran on the CPU without a word).
+#[cfg(not(feature = "gpu"))]
+#[test]
+fn a_gpu_device_without_the_backend_is_refused() {
+    let d = tmpdir("bad-gpu");
+    let (ok, err) = simulate(&d, &format!("{SMALL}[compute]\ndevice = \"gpu\"\n"), None);
+    assert_one_line_error(ok, &err, &["exp.toml", "compute.device", "--features gpu"]);
+}

@@ -131,7 +131,8 @@ fn timed<In, Out>(times: &mut Vec<StageTime>, step: &dyn Step<In, Out>, input: &
 /// A failure to open `[compute] device`, naming the key and its value.
 fn on_device(exp: &Experiment, e: specmux_core::Error) -> specmux_core::Error {
     let device = format!("{:?}", exp.compute.device).to_lowercase();
-    e.within(&exp.file, "compute.device", device)
+    e.in_file(&exp.file)
+        .within(&exp.file, "compute.device", device)
 }
 
 impl Pipeline {
