@@ -67,7 +67,7 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     if source.contains(':') {
         return refuse(&format!("{source} takes its size from the file"));
     }
-    if !(16..=8192).contains(&n) {
+    if !specmux_twin::scene::config::SIDE_PX.contains(&n) {
         return refuse("must be 16 to 8192 pixels (as scene.size)");
     }
     exp.scene.size = [n, n];
@@ -489,7 +489,7 @@ pub fn ptc(
     lib: &Library,
 ) -> Result<String> {
     let mut text = String::new();
-    if !(16..=8192).contains(&size) {
+    if !specmux_twin::scene::config::SIDE_PX.contains(&size) {
         return Err(Error::config(
             "--size",
             "size",

@@ -5,6 +5,10 @@ use specmux_core::spectral::Grid;
 use specmux_core::{Error, Result};
 use std::path::{Path, PathBuf};
 
+/// The side lengths a frame may have, in pixels (`scene.size`, and `--size` where a command
+/// takes one).
+pub const SIDE_PX: std::ops::RangeInclusive<usize> = 16..=8192;
+
 /// What is imaged.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -95,7 +99,7 @@ impl SceneConfig {
     /// the value.
     pub fn validate(&self, f: &str) -> Result<()> {
         for (k, &n) in self.size.iter().enumerate() {
-            if !(16..=8192).contains(&n) {
+            if !SIDE_PX.contains(&n) {
                 return Err(Error::config(
                     f,
                     &format!("scene.size[{k}]"),
