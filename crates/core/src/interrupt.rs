@@ -23,7 +23,13 @@ pub fn clear() {
 
 /// `Err(Error::Interrupted)` naming `during` when a stop has been asked for.
 pub fn check(during: &str) -> Result<()> {
-    if requested() {
+    check_flag(&REQUESTED, during)
+}
+
+/// `check` against a given flag: tests use their own, since the process-wide one would stop
+/// every loop of the tests running beside them.
+fn check_flag(flag: &AtomicBool, during: &str) -> Result<()> {
+    if flag.load(Ordering::SeqCst) {
         Err(Error::Interrupted(during.to_string()))
     } else {
         Ok(())
@@ -36,12 +42,14 @@ mod tests {
 
     #[test]
     fn a_request_turns_check_into_an_error_naming_the_step() {
-        clear();
-        assert!(check("GAP iteration 3").is_ok());
-        request();
-        let e = check("GAP iteration 3").unwrap_err().to_string();
+        let flag = AtomicBool::new(false);
+        assert!(check_flag(&flag, "GAP iteration 3").is_ok());
+        flag.store(true, Ordering::SeqCst);
+        let e = check_flag(&flag, "GAP iteration 3")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("GAP iteration 3"), "{e}");
-        clear();
-        assert!(check("x").is_ok());
+        flag.store(false, Ordering::SeqCst);
+        assert!(check_flag(&flag, "x").is_ok());
     }
 }
