@@ -85,11 +85,6 @@ pub struct GpuJoint {
     clip: Launch,
     channels: GpuMix,
     b: Buffers,
-    /// The shader's parameters and their uniform buffer (λ per |y| is rewritten with ω's mean).
-    params: Params,
-    uniform: wgpu::Buffer,
-    /// tv_weight·mean‖a‖: λ per mean|y| before ω's mean scales it, as on the CPU.
-    lambda_per_y: f64,
     /// The objective list, the scalars' header, the extremes and the counter, for the host.
     staging: wgpu::Buffer,
 }
@@ -210,9 +205,6 @@ impl GpuJoint {
                 b.objective.size() + 4 * SCALARS as u64 + 12,
             ),
             b,
-            params,
-            uniform: uniform.clone(),
-            lambda_per_y: t.config.tv_weight * t.mean_a_norm,
         };
         joint.write_weights(ctx, &vec![1.0; npx]);
         Ok(joint)
@@ -232,22 +224,23 @@ impl GpuJoint {
                 "joint: a data weight is negative, NaN or infinite".into(),
             ));
         }
+        if omega.data.iter().all(|&v| v == 0.0) {
+            return Err(GpuError::Numerical(
+                "joint: every data weight is zero; there is no measurement to fit".into(),
+            ));
+        }
         self.write_weights(ctx, &omega.data);
         Ok(())
     }
 
-    /// ω into its table, and λ per |y| times mean ω (the CPU's λ = tv_weight·mean|y|·mean‖a‖·mean ω).
+    /// ω over its mean into its table, as the CPU's `Joint::start` takes it (so λ and the
+    /// spectral prior keep their balance against the data whatever the weights' units).
     fn write_weights(&self, ctx: &GpuContext, omega: &[f32]) {
         let at = ((self.j + 3) * self.npx * 4) as u64;
-        ctx.queue
-            .write_buffer(&self.b.tab, at, bytemuck::cast_slice(omega));
         let mean = omega.iter().map(|&v| v as f64).sum::<f64>() / omega.len() as f64;
-        let params = Params {
-            lambda_per_y: (self.lambda_per_y * mean) as f32,
-            ..self.params
-        };
+        let scaled: Vec<f32> = omega.iter().map(|&v| (v as f64 / mean) as f32).collect();
         ctx.queue
-            .write_buffer(&self.uniform, 0, bytemuck::bytes_of(&params));
+            .write_buffer(&self.b.tab, at, bytemuck::cast_slice(&scaled));
     }
 
     /// The state buffer: its first J planes are α (the seed goes there before `encode`).
