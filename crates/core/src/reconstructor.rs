@@ -69,6 +69,19 @@ pub enum ComputeDevice {
     Auto,
 }
 
+impl ComputeDevice {
+    /// The refusal of `device = "gpu"` by a build without the GPU backend (the `gpu` feature),
+    /// naming `file`'s key and how to build one.
+    pub fn not_built(file: &str) -> Error {
+        Error::config(
+            file,
+            "compute.device",
+            "\"gpu\"",
+            "this specmux was built without the GPU backend: cargo build --release --features gpu",
+        )
+    }
+}
+
 /// Reconstruction settings (`[reconstruct]`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]

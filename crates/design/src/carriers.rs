@@ -223,23 +223,13 @@ fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
             "must be in [0, 1]",
         ));
     }
-    if !(1..=100).contains(&a.candidates) {
-        return Err(Error::config(
-            "--candidates",
-            "candidates",
-            a.candidates,
-            "must be 1 to 100 designed layouts per crop",
-        ));
-    }
-    if j == 0 || j > 16 {
-        return Err(Error::config(
-            "--carriers",
-            "carriers",
-            j,
-            "needs 1 to 16 carriers",
-        ));
-    }
-    Ok(())
+    crate::count_in(
+        "--candidates",
+        a.candidates,
+        1..=100,
+        "designed layouts per crop",
+    )?;
+    crate::count_in("--carriers", j, 1..=16, "carriers")
 }
 
 /// Predicted scores of a layout as a candidate (simulations filled in later).

@@ -181,14 +181,7 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
             "must be positive",
         ));
     }
-    if !(1..=1000).contains(&a.top) {
-        return Err(Error::config(
-            "--top",
-            "top",
-            a.top,
-            "must be 1 to 1000 sets",
-        ));
-    }
+    crate::count_in("--top", a.top, 1..=1000, "sets")?;
     let t0 = Instant::now();
     let base = base_experiment(a.experiment.as_deref())?;
     let s = setup(a, &base, lib)?;

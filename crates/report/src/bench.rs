@@ -254,12 +254,7 @@ impl Device {
         #[cfg(not(feature = "gpu"))]
         match device {
             ComputeDevice::Cpu => Ok(Device::cpu()),
-            ComputeDevice::Gpu => Err(Error::config(
-                file,
-                "compute.device",
-                "gpu",
-                "this specmux was built without the GPU backend: cargo build --release --features gpu",
-            )),
+            ComputeDevice::Gpu => Err(ComputeDevice::not_built(file)),
             ComputeDevice::Auto => {
                 eprintln!(
                     "compute device auto: built without the gpu feature; reconstructing on the CPU"

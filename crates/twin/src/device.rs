@@ -21,12 +21,11 @@ impl OpenDevice {
         });
         #[cfg(not(feature = "gpu"))]
         match device {
-            specmux_core::reconstructor::ComputeDevice::Gpu => Err(specmux_core::Error::config(
-                specmux_core::error::UNNAMED_FILE,
-                "compute.device",
-                "\"gpu\"",
-                "this specmux was built without the GPU backend: cargo build --release --features gpu",
-            )),
+            specmux_core::reconstructor::ComputeDevice::Gpu => {
+                Err(specmux_core::reconstructor::ComputeDevice::not_built(
+                    specmux_core::error::UNNAMED_FILE,
+                ))
+            }
             _ => Ok(OpenDevice {}),
         }
     }

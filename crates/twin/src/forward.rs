@@ -142,15 +142,7 @@ impl Pipeline {
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
-            let chain = Chain::new(
-                &exp.rig.optics(),
-                &rig.imaged_carriers,
-                &rig.pattern_lights(exp)?,
-                rig.width,
-                rig.height,
-            )
-            .map_err(|e| e.in_file(&exp.file))?
-            .with_pair_summer(pair_summer_for(&device));
+            let chain = rig.chain(exp)?.with_pair_summer(pair_summer_for(&device));
             PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
         } else {
             PatternSteps::Ideal(IdealPatternStage {

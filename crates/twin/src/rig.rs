@@ -196,17 +196,10 @@ impl Rig {
         let Some(f) = exp.rig.fourier_filter.as_ref() else {
             return Ok(None);
         };
-        let lights = self.pattern_lights(exp)?;
-        let in_file = |e: Error| e.in_file(&exp.file);
-        let chain = Chain::new(
-            &exp.rig.optics(),
-            &self.imaged_carriers,
-            &lights,
-            self.width,
-            self.height,
-        )
-        .map_err(in_file)?;
-        let periodic = chain.periodic_patterns().map_err(in_file)?;
+        let periodic = self
+            .chain(exp)?
+            .periodic_patterns()
+            .map_err(|e| e.in_file(&exp.file))?;
         let Some(blur) = periodic.iter().map(|p| p.1).reduce(f64::max) else {
             return Ok(None);
         };
@@ -220,6 +213,19 @@ impl Rig {
             f.pinhole_radius_um,
             which.join(", ")
         )))
+    }
+
+    /// The optics chain that images this rig's patterns under the experiment's optics (errors
+    /// name the experiment file).
+    pub fn chain(&self, exp: &Experiment) -> Result<Chain> {
+        Chain::new(
+            &exp.rig.optics(),
+            &self.imaged_carriers,
+            &self.pattern_lights(exp)?,
+            self.width,
+            self.height,
+        )
+        .map_err(|e| e.in_file(&exp.file))
     }
 
     /// What the reconstruction core knows of this rig before any frame: the design.

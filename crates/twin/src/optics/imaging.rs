@@ -361,8 +361,8 @@ impl Chain {
         let mut out = Vec::new();
         for (i, (c, light)) in self.carriers.iter().zip(&self.lights).enumerate() {
             let g = geometry(self.cfg.lens.as_ref(), m, c, self.width, self.height)?;
-            let ap = f.aperture(m.pitch_um, g.fxd, g.fyd, light);
-            if grid(self.cfg.dmd.is_some(), m, &g, &ap, light)?.pad == 1 {
+            let (ap, grid) = filtered_grid(self.cfg.dmd.is_some(), f, m, &g, light)?;
+            if grid.pad == 1 {
                 out.push((i, 0.61 / ap.at_wavelength(light.support_nm().1).radius));
             }
         }
@@ -755,8 +755,7 @@ pub fn relay_filtered(
     pairs: &dyn PairSummer,
 ) -> Result<IntensitySpectrum> {
     let g = display.geometry;
-    let ap = f.aperture(m.pitch_um, g.fxd, g.fyd, light);
-    let grid = grid(dmd.is_some(), m, &g, &ap, light)?;
+    let (ap, grid) = filtered_grid(dmd.is_some(), f, m, &g, light)?;
     let coherent = f.illumination == Illumination::Coherent;
     let spectrum = ModulatorSpectrum::new(dmd, display, &grid, coherent);
     let bins = passed_bins(&ap, light, f.illumination, grid.coarse(), |kx, ky| {
@@ -777,6 +776,20 @@ pub fn relay_filtered(
             incoherent_source: (!coherent).then_some(spectrum),
         },
     })
+}
+
+/// The filter's openings as `light` sees them through geometry `g`, and the grid the relay
+/// runs on for them (padded where the openings are narrow).
+fn filtered_grid(
+    dithered: bool,
+    f: &FourierFilterConfig,
+    m: &DmdConfig,
+    g: &Geometry,
+    light: &PatternLight,
+) -> Result<(Aperture, Grid)> {
+    let ap = f.aperture(m.pitch_um, g.fxd, g.fyd, light);
+    let grid = grid(dithered, m, g, &ap, light)?;
+    Ok((ap, grid))
 }
 
 /// Without a filter the relay passes the modulator's whole band-limited spectrum.
