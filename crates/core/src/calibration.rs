@@ -85,6 +85,8 @@ impl MeasuredCarrier {
 pub struct DarkFlat {
     pub dark: Cube,
     pub flat: Cube,
+    /// Exposures each of the two frames is the mean of (their own noise is 1/N of one frame's).
+    pub frames_averaged: usize,
 }
 
 impl DarkFlat {
@@ -137,6 +139,7 @@ impl Calibration {
             (Some(d), Some(f)) => Some(DarkFlat {
                 dark: d.clone(),
                 flat: f.clone(),
+                frames_averaged: frames.frames_averaged.max(1),
             }),
             (None, None) => None,
             _ => {

@@ -74,8 +74,10 @@ impl NoiseModel {
     }
 
     /// ω_p = 1/var(y_p) of a linearised frame y = g⊙(raw − dark), g_p the flat-field gain
-    /// mean(flat − dark)/(flat_p − dark_p): var(y_p) = g_p²σ_y.dark² + g_p·K·max(y_p, 0), and
-    /// the pixels where the `raw` frame reads the saturation level. Without a dark/flat
+    /// m/(flat_p − dark_p), m = mean(flat − dark): the frame's own variance
+    /// g_p²σ_y.dark² + g_p·K·max(y_p, 0) plus that of the dark and flat frames, each the mean of
+    /// N exposures, carried through the correction to first order ([`NoiseModel::variance`]);
+    /// and the pixels where the `raw` frame reads the saturation level. Without a dark/flat
     /// correction g = 1 (the frame is taken as raw DN above dark). A frame saturated everywhere
     /// is refused: it bounds the light from below and says nothing else.
     pub fn weights(
@@ -86,16 +88,18 @@ impl NoiseModel {
     ) -> Result<DataWeights> {
         self.validate("noise weights")?;
         y.check_same_shape(raw, "noise weights: linearised frame against raw frame")?;
-        let gains = match dark_flat {
-            Some(df) => flat_gains(df, y)?,
-            None => vec![1.0; y.pixels()],
+        let (gains, calibration) = match dark_flat {
+            Some(df) => {
+                let (gains, mean) = flat_gains(df, y)?;
+                (gains, Some((mean, df.frames_averaged.max(1) as f64)))
+            }
+            None => (vec![1.0; y.pixels()], None),
         };
-        let (s2, k) = (self.dark_noise_dn.powi(2), self.gain_dn_per_e);
         let data: Vec<f32> = y
             .data
             .par_iter()
             .zip(&gains)
-            .map(|(&v, &g)| (1.0 / (g * g * s2 + g * k * (v as f64).max(0.0))) as f32)
+            .map(|(&v, &g)| (1.0 / self.variance(v as f64, g, calibration)) as f32)
             .collect();
         let saturated: Vec<bool> = raw.data.iter().map(|&r| self.saturated(r)).collect();
         let everywhere = !saturated.is_empty() && saturated.iter().all(|&s| s);
@@ -111,9 +115,26 @@ impl NoiseModel {
     }
 }
 
-/// g_p = mean(flat − dark)/(flat_p − dark_p): the factor `calibration::calibrate` multiplies
-/// pixel p's raw signal by.
-fn flat_gains(df: &DarkFlat, y: &Cube) -> Result<Vec<f64>> {
+impl NoiseModel {
+    /// var(y) of one pixel of y = m(raw − d)/(f − d), g = m/(f − d): g²·var(raw) from the frame,
+    /// and with `calibration` = (m, N) the dark and flat frames' var(d) = σ²/N and
+    /// var(f) = (σ² + K(f − d))/N times the squares of ∂y/∂d = g(y/m − 1) and ∂y/∂f = −g·y/m
+    /// (m, the mean over the whole frame, taken as exact).
+    fn variance(&self, y: f64, g: f64, calibration: Option<(f64, f64)>) -> f64 {
+        let (s2, k) = (self.dark_noise_dn.powi(2), self.gain_dn_per_e);
+        let frame = g * g * s2 + g * k * y.max(0.0);
+        let Some((m, n)) = calibration else {
+            return frame;
+        };
+        let dark = (g * (y / m - 1.0)).powi(2) * s2;
+        let flat = (g * y / m).powi(2) * (s2 + k * m / g);
+        frame + (dark + flat) / n
+    }
+}
+
+/// g_p = mean(flat − dark)/(flat_p − dark_p), the factor `calibration::calibrate` multiplies
+/// pixel p's raw signal by, and that mean.
+fn flat_gains(df: &DarkFlat, y: &Cube) -> Result<(Vec<f64>, f64)> {
     y.check_same_shape(&df.dark, "noise weights: frame against dark frame")?;
     y.check_same_shape(&df.flat, "noise weights: frame against flat frame")?;
     let resp: Vec<f64> = df
@@ -130,7 +151,7 @@ fn flat_gains(df: &DarkFlat, y: &Cube) -> Result<Vec<f64>> {
         )));
     }
     let mean = resp.iter().sum::<f64>() / resp.len() as f64;
-    Ok(resp.iter().map(|r| mean / r).collect())
+    Ok((resp.iter().map(|r| mean / r).collect(), mean))
 }
 
 #[cfg(test)]
@@ -138,8 +159,10 @@ mod tests {
     use super::*;
 
     /// Two pixels by hand: K = 0.5 DN/e⁻, σ = 2 DN, dark (10, 10), flat (110, 60) → responses
-    /// (100, 50), mean 75, gains (0.75, 1.5). y = (30, −4): var = 0.75²·4 + 0.75·0.5·30 =
-    /// 2.25 + 11.25 = 13.5 and 1.5²·4 + 0 = 9 (a negative signal adds no shot noise).
+    /// (100, 50), mean m = 75, gains (0.75, 1.5). y = (30, −4): the frame's var = 0.75²·4 +
+    /// 0.75·0.5·30 = 2.25 + 11.25 = 13.5 and 1.5²·4 + 0 = 9 (a negative signal adds no shot
+    /// noise). Dark and flat of N = 4 exposures add [(g(y/m − 1))²σ² + (gy/m)²(σ² + Km/g)]/N:
+    /// (0.81 + 4.86)/4 = 1.4175 and (9.9856 + 0.1856)/4 = 2.5428.
     #[test]
     fn weights_of_a_case_computed_by_hand() {
         let m = NoiseModel {
@@ -150,9 +173,18 @@ mod tests {
         let df = DarkFlat {
             dark: Cube::from_vec(2, 1, 1, vec![10.0, 10.0]).unwrap(),
             flat: Cube::from_vec(2, 1, 1, vec![110.0, 60.0]).unwrap(),
+            frames_averaged: 4,
         };
         let y = Cube::from_vec(2, 1, 1, vec![30.0, -4.0]).unwrap();
         let w = m.weights(&y, &y, Some(&df)).unwrap().omega;
+        assert!((w.data[0] - 1.0 / 14.9175).abs() < 1e-7, "{:?}", w.data);
+        assert!((w.data[1] - 1.0 / 11.5428).abs() < 1e-7, "{:?}", w.data);
+        // Averaged without end, the dark and flat add nothing.
+        let exact = DarkFlat {
+            frames_averaged: 1 << 40,
+            ..df
+        };
+        let w = m.weights(&y, &y, Some(&exact)).unwrap().omega;
         assert!((w.data[0] - 1.0 / 13.5).abs() < 1e-7, "{:?}", w.data);
         assert!((w.data[1] - 1.0 / 9.0).abs() < 1e-7, "{:?}", w.data);
         // Without dark/flat: var = σ² + K·y.
@@ -161,17 +193,20 @@ mod tests {
     }
 
     /// The weights match the sample variance of simulated Poisson + Gaussian frames pushed
-    /// through the same dark/flat correction (a property of the derivation, not of the code).
+    /// through the same dark/flat correction, with the dark and flat frames themselves drawn
+    /// afresh (each the mean of N = 4 exposures) for every frame: a property of the
+    /// derivation, not of the code.
     #[test]
     fn weights_match_the_sample_variance_of_corrected_frames() {
         use rand::SeedableRng;
         use rand_distr::{Distribution, Normal, Poisson};
-        let (k, sd) = (0.25, 0.9);
+        let (k, sd, frames) = (0.25, 0.9, 4usize);
         let (electrons, dark_dn, resp) = (4000.0, 100.0f64, [800.0f64, 400.0]);
         let df = DarkFlat {
             dark: Cube::from_vec(2, 1, 1, vec![dark_dn as f32; 2]).unwrap(),
             flat: Cube::from_vec(2, 1, 1, resp.iter().map(|r| (r + dark_dn) as f32).collect())
                 .unwrap(),
+            frames_averaged: frames,
         };
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
         let read = Normal::new(0.0, sd).unwrap();
@@ -181,10 +216,18 @@ mod tests {
             // The pixel's quantum efficiency × light scales with its flat response.
             let mu = electrons * r / mean_resp;
             let pois = Poisson::new(mu).unwrap();
+            let flat_pois = Poisson::new(r / k).unwrap();
+            type Rng = rand_pcg::Pcg64Mcg;
+            let mean_of = |g: &mut Rng, signal: &dyn Fn(&mut Rng) -> f64| {
+                (0..frames).map(|_| signal(g)).sum::<f64>() / frames as f64
+            };
             let ys: Vec<f64> = (0..n)
                 .map(|_| {
-                    let raw = k * pois.sample(&mut rng) + read.sample(&mut rng) + dark_dn;
-                    (raw - dark_dn) / r * mean_resp
+                    let g = &mut rng;
+                    let dark = mean_of(g, &|g| read.sample(g) + dark_dn);
+                    let flat = mean_of(g, &|g| k * flat_pois.sample(g) + read.sample(g) + dark_dn);
+                    let raw = k * pois.sample(g) + read.sample(g) + dark_dn;
+                    (raw - dark) / (flat - dark) * mean_resp
                 })
                 .collect();
             let mean = ys.iter().sum::<f64>() / n as f64;
