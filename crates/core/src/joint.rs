@@ -1144,7 +1144,7 @@ fn normalised_weights(omega: Option<&Cube>, n: usize) -> Result<(Vec<f32>, f64)>
         return Err(Error::Numerical("joint: a data weight is negative".into()));
     }
     let mean = o.data.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
-    if !(mean > 0.0) {
+    if mean <= 0.0 {
         return Err(Error::Numerical(
             "joint: every data weight is zero; there is no measurement to fit".into(),
         ));
