@@ -259,3 +259,27 @@ fn a_gpu_device_without_the_backend_is_refused() {
     let (ok, err) = simulate(&d, &format!("{SMALL}[compute]\ndevice = \"gpu\"\n"), None);
     assert_one_line_error(ok, &err, &["exp.toml", "compute.device", "--features gpu"]);
 }
+
+/// A frame saturated everywhere, reconstructed with the noise weights, is refused naming the
+/// key that asked for them (the error surfaced unnamed from the weights).
+#[test]
+fn a_frame_saturated_everywhere_names_the_noise_weights() {
+    let d = tmpdir("bad-saturated");
+    let toml = format!(
+        "{SMALL}[rig.sensor]\nelectrons_at_full_scale = 1e12\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 5\nnoise_weights = true\n"
+    );
+    let exp = d.join("exp.toml");
+    std::fs::write(&exp, toml).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_specmux"))
+        .arg("demo")
+        .arg("--scene")
+        .arg(&exp)
+        .arg("--out")
+        .arg(d.join("out"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    let must = ["exp.toml", "reconstruct.joint.noise_weights", "saturation level"];
+    assert_one_line_error(out.status.success(), &err, &must);
+    assert!(!d.join("out").exists(), "outputs appear all at once or not at all");
+}

@@ -361,6 +361,11 @@ pub struct JointState {
 }
 
 impl Joint {
+    /// The experiment file it was built for (named by errors that surface in a run).
+    pub fn file(&self) -> &str {
+        &self.file
+    }
+
     /// `patterns`: the C effective channel patterns S'_i (planes); `system` F (C × J);
     /// `basis` B (bands × J); `prior` the spectral prior's J × J quadratic term in the
     /// unmixer's units (`unmix::curvature(B, η)` or `Basis::coefficient_prior`).

@@ -116,6 +116,23 @@ impl NoiseModel {
 }
 
 impl NoiseModel {
+    /// The raw frame's mean signal above `dark` over the noise of a pixel at that signal,
+    /// mean(raw − dark)/√(σ_y.dark² + K·max(mean, 0)): below about 1 a single frame says little
+    /// more than the prior does, and a reconstruction of it should say so.
+    pub fn mean_snr(&self, raw: &Cube, dark: &Cube) -> Result<f64> {
+        self.validate("frame SNR")?;
+        raw.check_same_shape(dark, "frame SNR: frame against dark frame")?;
+        let n = raw.data.len().max(1) as f64;
+        let signal = raw
+            .data
+            .iter()
+            .zip(&dark.data)
+            .map(|(&r, &d)| r as f64 - d as f64)
+            .sum::<f64>()
+            / n;
+        Ok(signal / self.variance(signal, 1.0, None).sqrt())
+    }
+
     /// var(y) of one pixel of y = m(raw − d)/(f − d), g = m/(f − d): g²·var(raw) from the frame,
     /// and with `calibration` = (m, N) the dark and flat frames' var(d) = σ²/N and
     /// var(f) = (σ² + K(f − d))/N times the squares of ∂y/∂d = g(y/m − 1) and ∂y/∂f = −g·y/m
@@ -249,6 +266,23 @@ mod tests {
                 "pixel {p}: sample {var:.3} against {predicted:.3}"
             );
         }
+    }
+
+    /// SNR by hand: K = 0.5, σ = 2; raw (110, 30) over dark (10, 10): mean signal 60 DN,
+    /// noise √(4 + 30) = √34, SNR 60/√34 = 10.29; a frame at the dark level has SNR 0.
+    #[test]
+    fn the_mean_snr_by_hand() {
+        let m = NoiseModel {
+            gain_dn_per_e: 0.5,
+            dark_noise_dn: 2.0,
+            saturation_dn: None,
+        };
+        let dark = Cube::from_vec(2, 1, 1, vec![10.0, 10.0]).unwrap();
+        let raw = Cube::from_vec(2, 1, 1, vec![110.0, 30.0]).unwrap();
+        let snr = m.mean_snr(&raw, &dark).unwrap();
+        assert!((snr - 60.0 / 34f64.sqrt()).abs() < 1e-12, "{snr}");
+        assert_eq!(m.mean_snr(&dark, &dark).unwrap(), 0.0);
+        assert!(m.mean_snr(&raw, &Cube::zeros(1, 1, 1)).is_err());
     }
 
     /// Saturation by hand: level 3882 DN; raw (3882, 3881.6, 3881.4, 4095) → the first, second

@@ -368,9 +368,10 @@ impl Reconstructor {
         let t1 = t.elapsed().as_secs_f64();
         if let Some(j) = &self.joint {
             let omega = match &self.noise {
-                Some(nm) => {
-                    Some(nm.weights(frame, &measured, self.calibration.dark_flat.as_ref())?)
-                }
+                Some(nm) => Some(
+                    nm.weights(frame, &measured, self.calibration.dark_flat.as_ref())
+                        .map_err(|e| e.within(j.file(), "reconstruct.joint.noise_weights", true))?,
+                ),
                 None => None,
             };
             let seed = self.unconstrained_alpha(&xhat)?;

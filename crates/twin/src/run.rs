@@ -61,12 +61,18 @@ pub struct FrameStats {
     /// Pixels that read the camera's saturation level, rounded to the DN (raw frames only).
     pub saturated_pixels: usize,
     pub non_finite_pixels: usize,
+    /// Mean signal above dark over the noise at that signal (`NoiseModel::mean_snr`); absent
+    /// without a camera.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_snr: Option<f64>,
 }
 
 impl FrameStats {
-    /// Count on `frame`; `saturation_dn` is the raw frame's ceiling (None for a linear frame).
-    pub fn of(frame: &Cube, saturation_dn: Option<f64>) -> FrameStats {
+    /// Count on `frame`; `saturation_dn` is the raw frame's ceiling (None for a linear frame);
+    /// `mean_snr` is the frame's, when a camera recorded it.
+    pub fn of(frame: &Cube, saturation_dn: Option<f64>, mean_snr: Option<f64>) -> FrameStats {
         FrameStats {
+            mean_snr,
             pixels: frame.data.len(),
             saturated_pixels: match saturation_dn {
                 Some(s) => frame
@@ -80,16 +86,24 @@ impl FrameStats {
         }
     }
 
-    /// A warning when a noticeable share of the frame is saturated (0.1 %).
-    fn warning(&self) -> Option<String> {
-        (self.saturated_pixels * 1000 > self.pixels).then(|| {
+    /// Warnings when a noticeable share of the frame is saturated (0.1 %) and when its mean
+    /// signal is below its noise.
+    fn warnings(&self) -> impl Iterator<Item = String> {
+        let saturated = (self.saturated_pixels * 1000 > self.pixels).then(|| {
             format!(
                 "{} of {} pixels ({:.1} %) are saturated: the reconstruction there is wrong (the joint method with noise_weights = true takes them as lower bounds, the others as readings); lower the light (rig.sensor.electrons_at_full_scale)",
                 self.saturated_pixels,
                 self.pixels,
                 100.0 * self.saturated_pixels as f64 / self.pixels as f64
             )
-        })
+        });
+        let dim = self.mean_snr.filter(|&s| s < 1.0).map(|s| {
+            let s = s.max(0.0);
+            format!(
+                "the frame's mean signal is {s:.2} times its noise: one frame says little beyond the reconstruction's prior, so its figures are mostly the prior's; raise the light (rig.sensor.electrons_at_full_scale) or the exposure"
+            )
+        });
+        saturated.into_iter().chain(dim)
     }
 }
 
@@ -249,7 +263,11 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
         None => None,
     };
-    let frame = FrameStats::of(&sim.frame, saturation);
+    let snr = match (&rig.noise, &recon.calibration.dark_flat) {
+        (Some(nm), Some(df)) => Some(nm.mean_snr(&sim.frame, &df.dark)?),
+        _ => None,
+    };
+    let frame = FrameStats::of(&sim.frame, saturation, snr);
     let error_budget = error_budget(exp, &rig, &sim.channels)?;
     let basis = BasisReport {
         vectors: rig.basis.len(),
@@ -303,7 +321,7 @@ fn warnings(
     rig.warnings
         .iter()
         .cloned()
-        .chain(frame.warning())
+        .chain(frame.warnings())
         .chain(joint.and_then(|j| j.warning()))
         .chain(flagged)
         .collect()
@@ -553,6 +571,24 @@ mod tests {
     use super::*;
     use specmux_core::noise::NoiseModel;
 
+    /// A frame whose mean signal is under its noise is named in the warnings (SNR 0.4), one
+    /// above it is not (SNR 3), nor one without a camera.
+    #[test]
+    fn a_frame_below_its_noise_is_a_warning() {
+        let frame = Cube::zeros(4, 1, 1);
+        let said = |snr| {
+            FrameStats::of(&frame, None, snr)
+                .warnings()
+                .collect::<Vec<_>>()
+        };
+        let dim = said(Some(0.4));
+        assert!(
+            dim.len() == 1 && dim[0].contains("0.40 times its noise"),
+            "{dim:?}"
+        );
+        assert!(said(Some(3.0)).is_empty() && said(None).is_empty());
+    }
+
     /// The frame statistics count the pixels the noise weights flag: level 3882 DN, raw (3882,
     /// 3881.6, 3881.4, 4095) → the first, second (rounds to 3882) and last read it.
     #[test]
@@ -564,9 +600,9 @@ mod tests {
             saturation_dn: Some(3882.0),
         };
         let flagged = model.weights(&raw, &raw, None).unwrap().saturated;
-        let stats = FrameStats::of(&raw, model.saturation_dn);
+        let stats = FrameStats::of(&raw, model.saturation_dn, None);
         assert_eq!(stats.saturated_pixels, 3);
         assert_eq!(flagged.iter().filter(|&&s| s).count(), 3);
-        assert_eq!(FrameStats::of(&raw, None).saturated_pixels, 0);
+        assert_eq!(FrameStats::of(&raw, None, None).saturated_pixels, 0);
     }
 }
