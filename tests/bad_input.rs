@@ -279,7 +279,14 @@ fn a_frame_saturated_everywhere_names_the_noise_weights() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
-    let must = ["exp.toml", "reconstruct.joint.noise_weights", "saturation level"];
+    let must = [
+        "exp.toml",
+        "reconstruct.joint.noise_weights",
+        "saturation level",
+    ];
     assert_one_line_error(out.status.success(), &err, &must);
-    assert!(!d.join("out").exists(), "outputs appear all at once or not at all");
+    assert!(
+        !d.join("out").exists(),
+        "outputs appear all at once or not at all"
+    );
 }

@@ -197,6 +197,17 @@ impl JointConfig {
                 ));
             }
         }
+        if self.reweight_rounds > 0 && self.reweight_rounds >= self.iterations {
+            return Err(Error::config(
+                file,
+                &key("reweight_rounds"),
+                self.reweight_rounds,
+                &format!(
+                    "needs fewer rounds than iterations ({}): the run is split into rounds + 1 stages of at least one iteration each",
+                    self.iterations
+                ),
+            ));
+        }
         if self.prior == Prior::Pnp && self.reweight_rounds > 0 {
             return Err(Error::config(
                 file,
@@ -2123,6 +2134,15 @@ mod tests {
                     ..cfg.clone()
                 },
                 "`reconstruct.joint.reweight_eps` = -1:",
+            ),
+            (
+                // 10 rounds in 5 iterations refreshed 4 times and reported 10.
+                JointConfig {
+                    reweight_rounds: 10,
+                    iterations: 5,
+                    ..cfg.clone()
+                },
+                "`reconstruct.joint.reweight_rounds` = 10: needs fewer rounds than iterations (5)",
             ),
             (
                 JointConfig {
