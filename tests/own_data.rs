@@ -303,6 +303,12 @@ fn measured_calibration_frames_are_used_by_reconstruct() {
         .as_str()
         .unwrap()
         .contains("rec/calibration"));
+    // The camera's noise model and the recorded dark frame give the frame's SNR; it is high.
+    let snr = report["mean_snr"].as_f64().unwrap();
+    assert!(
+        snr > 10.0 && report["warnings"] == serde_json::json!([]),
+        "{report}"
+    );
     // A folder that lacks a pattern is refused by name.
     std::fs::remove_file(d.join("rec/calibration/pattern-6.exr")).unwrap();
     let a = [
@@ -452,4 +458,36 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
             .unwrap();
     assert_eq!(rec["spectra"], lib.display().to_string());
     check_schema("reconstruct.json", &rec);
+}
+
+/// A frame recorded with almost no light is reconstructed with a warning that its signal is
+/// under its noise, in the text and in reconstruct.json.
+#[test]
+fn reconstruct_warns_of_a_frame_under_its_noise() {
+    let d = tmpdir("own-dim");
+    let exp = "[scene]\nsize = [64, 64]\n[reconstruct.gap]\nmethod = \"fourier\"\n[rig.sensor]\nelectrons_at_full_scale = 1e-6\n";
+    std::fs::write(d.join("dim.toml"), exp).unwrap();
+    ok(&d, &["simulate", "dim.toml", "--out", "rec"]);
+    let text = ok(
+        &d,
+        &[
+            "reconstruct",
+            "rec/frame.exr",
+            "--experiment",
+            "dim.toml",
+            "--calibration",
+            "rec/calibration",
+            "--out",
+            "out",
+        ],
+    );
+    assert!(
+        text.contains("warning: the frame's mean signal is"),
+        "{text}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/reconstruct.json")).unwrap())
+            .unwrap();
+    assert!(report["mean_snr"].as_f64().unwrap() < 1.0, "{report}");
+    assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
 }

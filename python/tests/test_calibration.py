@@ -122,3 +122,17 @@ def test_a_bad_frame_is_refused_by_name(camera):
     with pytest.raises(specmux.SpecmuxError) as e:
         specmux.reconstruct(exp, frame)
     assert "frame: pixel (5, 3) is inf" in str(e.value)
+
+
+def test_a_frame_under_its_noise_warns_and_reports_its_snr(camera):
+    exp, sim = camera
+    given = specmux.reconstruct(exp, sim["frame"], calibration=sim["calibration"], full=True)
+    assert given["mean_snr"] > 10
+    # The dark frame itself as the frame: no signal above dark, a UserWarning that says so.
+    dark = sim["calibration"]["dark"]
+    with pytest.warns(UserWarning, match="times its noise"):
+        out = specmux.reconstruct(exp, dark, calibration=sim["calibration"], full=True)
+    assert abs(out["mean_snr"]) < 1
+    # Without a camera there is no noise model: no SNR, no warning.
+    plain = experiment()
+    assert specmux.reconstruct(plain, specmux.simulate(plain)["frame"], full=True)["mean_snr"] is None

@@ -5,12 +5,15 @@ use crate::calibration;
 use crate::convert::{cube_array, is_integer, library, to_cube, to_frame, to_py};
 use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
+use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use specmux_core::noise::{frame_snr, snr_warning};
 use specmux_core::reconstructor::Reconstructor;
 use specmux_report::commands::{frame_calibration, frame_experiment, Measured};
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
+use std::ffi::CString;
 use std::path::PathBuf;
 
 /// Reconstruct a cube from a frame of this experiment's rig, as `specmux reconstruct` does.
@@ -25,7 +28,9 @@ use std::path::PathBuf;
 /// Returns the cube (bands, height, width) float32, or with `full=True` a dict with `cube`,
 /// `xhat` (demultiplexed channels), `xgap` (after de-aliasing), the `unmix`, `gap` and `joint`
 /// statistics, `calibration` (`source` and the measured `carriers`) and `seconds`
-/// (demultiplex, de-alias, unmix). The GIL is released while it runs.
+/// (demultiplex, de-alias, unmix) and `mean_snr` (the frame's mean signal over its noise, None
+/// without a camera noise model and a dark frame). A frame under its noise raises a
+/// `UserWarning`. The GIL is released while it runs.
 #[pyfunction]
 #[pyo3(signature = (exp, frame, calibration = None, full = false, spectra = None))]
 pub fn reconstruct<'py>(
@@ -43,7 +48,7 @@ pub fn reconstruct<'py>(
         .map(|c| calibration::from_dict(c, frame.width, frame.height))
         .transpose()?;
     let lib = library(spectra);
-    let (out, cal) = interruptible(py, move || -> specmux_core::Result<_> {
+    let (out, cal, snr) = interruptible(py, move || -> specmux_core::Result<_> {
         let materials = Materials::load(&lib)?;
         let rig = Rig::build(&e, &lib, &materials)?;
         let measured = measured.as_ref().map(|frames| Measured {
@@ -52,10 +57,15 @@ pub fn reconstruct<'py>(
             key: "calibration",
         });
         let cal = frame_calibration(&e, &rig, &materials, measured)?;
-        let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
-        Ok((recon.run(&frame, None)?, cal))
+        let design = rig.design();
+        let snr = frame_snr(design.noise.as_ref(), cal.dark_flat.as_ref(), &frame)?;
+        let recon = Reconstructor::new(&e.reconstruct, &design, &cal, &e.file)?;
+        Ok((recon.run(&frame, None)?, cal, snr))
     })?
     .map_err(err)?;
+    if let Some(w) = snr.and_then(snr_warning) {
+        PyErr::warn(py, &py.get_type::<PyUserWarning>(), &CString::new(w)?, 1)?;
+    }
     if !full {
         return Ok(cube_array(py, out.cube)?.into_any());
     }
@@ -68,6 +78,7 @@ pub fn reconstruct<'py>(
     c.set_item("carriers", to_py(py, &cal.carriers)?)?;
     d.set_item("calibration", c)?;
     d.set_item("seconds", out.seconds.to_vec())?;
+    d.set_item("mean_snr", snr)?;
     d.set_item("cube", cube_array(py, out.cube)?)?;
     d.set_item("xhat", cube_array(py, out.xhat)?)?;
     d.set_item("xgap", cube_array(py, out.xgap)?)?;

@@ -605,6 +605,11 @@ struct ReconstructReport {
     /// What `method = "auto"` picked, from the table of the device that ran it (null for the
     /// other methods).
     auto: Option<specmux_core::auto::Choice>,
+    /// The frame's mean signal over its noise, when the design has the camera's noise model and
+    /// the calibration a dark frame (null otherwise).
+    mean_snr: Option<f64>,
+    /// For the operator: a frame under its noise.
+    warnings: Vec<String>,
 }
 
 #[derive(serde::Serialize)]
@@ -664,6 +669,15 @@ pub fn reconstruct(
     if let Some(choice) = &recon.auto {
         say!(text, "auto: {}", choice.reason);
     }
+    let mean_snr =
+        specmux_core::noise::frame_snr(design.noise.as_ref(), cal.dark_flat.as_ref(), &frame)?;
+    let warnings: Vec<String> = mean_snr
+        .and_then(specmux_core::noise::snr_warning)
+        .into_iter()
+        .collect();
+    for w in &warnings {
+        say!(text, "warning: {w}");
+    }
     let (cube, stats, times) = reconstruct_on_device(&device, &recon, &frame)?;
     say!(
         text,
@@ -702,6 +716,8 @@ pub fn reconstruct(
         unmix: stats,
         metrics,
         auto: recon.auto.clone(),
+        mean_snr,
+        warnings,
     };
     specmux_io::json::write_json(&files.path("reconstruct.json"), &report)?;
     crate::panel::write_figures(&exp, lib, truth.as_ref().map(|t| &t.1), &cube, &files)?;

@@ -97,12 +97,7 @@ impl FrameStats {
                 100.0 * self.saturated_pixels as f64 / self.pixels as f64
             )
         });
-        let dim = self.mean_snr.filter(|&s| s < 1.0).map(|s| {
-            let s = s.max(0.0);
-            format!(
-                "the frame's mean signal is {s:.2} times its noise: one frame says little beyond the reconstruction's prior, so its figures are mostly the prior's; raise the light (rig.sensor.electrons_at_full_scale) or the exposure"
-            )
-        });
+        let dim = self.mean_snr.and_then(specmux_core::noise::snr_warning);
         saturated.into_iter().chain(dim)
     }
 }
@@ -263,10 +258,8 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
         None => None,
     };
-    let snr = match (&rig.noise, &recon.calibration.dark_flat) {
-        (Some(nm), Some(df)) => Some(nm.mean_snr(&sim.frame, &df.dark)?),
-        _ => None,
-    };
+    let dark_flat = recon.calibration.dark_flat.as_ref();
+    let snr = specmux_core::noise::frame_snr(rig.noise.as_ref(), dark_flat, &sim.frame)?;
     let frame = FrameStats::of(&sim.frame, saturation, snr);
     let error_budget = error_budget(exp, &rig, &sim.channels)?;
     let basis = BasisReport {
