@@ -31,6 +31,9 @@ pub struct ReconstructedFrame {
     pub ssim: Option<f64>,
     pub sam_deg: Option<f64>,
     pub reconstruction_s: f64,
+    /// The frame's mean signal over its noise (`Reconstructor::frame_snr`); None without a
+    /// camera noise model or a dark frame.
+    pub mean_snr: Option<f64>,
 }
 
 /// A recorded frame: id, time, number of flags, raw DN.
@@ -47,6 +50,7 @@ pub fn reconstruct_frame(
     f: &RecordedFrame,
     truth: Option<&Cube>,
 ) -> Result<(Cube, ReconstructedFrame)> {
+    let mean_snr = recon.frame_snr(&f.raw)?;
     let t = Instant::now();
     let cube = recon.run(&f.raw, None)?.cube;
     let reconstruction_s = t.elapsed().as_secs_f64();
@@ -59,6 +63,7 @@ pub fn reconstruct_frame(
         ssim: m.as_ref().map(|m| m.ssim),
         sam_deg: m.and_then(|m| m.sam_deg),
         reconstruction_s,
+        mean_snr,
     };
     Ok((cube, row))
 }
@@ -112,25 +117,47 @@ pub fn band_names(exp: &Experiment) -> Result<Vec<String>> {
     Ok(grid.wavelengths().into_iter().map(exr::band_name).collect())
 }
 
-/// The table of per-frame results, with a summary line of the clean frames.
+/// A warning line naming the frames whose mean signal is under their noise (empty if none).
+fn dim_frames_warning(rows: &[ReconstructedFrame]) -> String {
+    let dim: Vec<&ReconstructedFrame> = rows
+        .iter()
+        .filter(|r| r.mean_snr.is_some_and(|s| s < 1.0))
+        .collect();
+    let worst = dim.iter().filter_map(|r| r.mean_snr).reduce(f64::min);
+    match worst.and_then(specmux_core::noise::snr_warning) {
+        Some(w) => {
+            let ids: Vec<String> = dim.iter().map(|r| r.frame_id.to_string()).collect();
+            format!(
+                "warning: frames {} under their noise; the dimmest: {w}\n",
+                ids.join(", ")
+            )
+        }
+        None => String::new(),
+    }
+}
+
+/// The table of per-frame results (the SNR column: `Reconstructor::frame_snr`), a warning for
+/// frames under their noise, and a summary line of the clean frames.
 pub fn frame_table(rows: &[ReconstructedFrame]) -> String {
     let show = |v: Option<f64>, p: usize| metrics::show(v, p);
     let mut t = format!(
-        "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9}\n",
-        "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s"
+        "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9} {:>7}\n",
+        "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s", "SNR"
     );
     for r in rows {
         t += &format!(
-            "{:>6} {:>10.6} {:>6} {:>9} {:>7} {:>9} {:>9.4}\n",
+            "{:>6} {:>10.6} {:>6} {:>9} {:>7} {:>9} {:>9.4} {:>7}\n",
             r.frame_id,
             r.timestamp_s,
             r.flags,
             show(r.psnr_db, 2),
             show(r.ssim, 4),
             show(r.sam_deg, 2),
-            r.reconstruction_s
+            r.reconstruction_s,
+            show(r.mean_snr, 1)
         );
     }
+    t += &dim_frames_warning(rows);
     let clean: Vec<&ReconstructedFrame> = rows.iter().filter(|r| r.flags == 0).collect();
     if clean.is_empty() {
         return t;
@@ -250,4 +277,44 @@ fn recorded_frames(dir: &Path) -> Result<Vec<RecordedFrame>> {
             })
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(frame_id: u64, mean_snr: Option<f64>) -> ReconstructedFrame {
+        ReconstructedFrame {
+            frame_id,
+            timestamp_s: 0.0,
+            flags: 0,
+            psnr_db: None,
+            ssim: None,
+            sam_deg: None,
+            reconstruction_s: 0.1,
+            mean_snr,
+        }
+    }
+
+    /// The table shows each frame's SNR and names the frames under their noise (0.3 and 0.8),
+    /// not the bright one (5) nor the one without a noise model.
+    #[test]
+    fn frames_under_their_noise_are_named_below_the_table() {
+        let rows = [
+            row(1, Some(0.8)),
+            row(2, Some(5.0)),
+            row(3, None),
+            row(4, Some(0.3)),
+        ];
+        let t = frame_table(&rows);
+        assert!(t.lines().next().unwrap().ends_with("SNR"), "{t}");
+        let warning: Vec<&str> = t.lines().filter(|l| l.starts_with("warning:")).collect();
+        assert_eq!(warning.len(), 1, "{t}");
+        assert!(
+            warning[0].starts_with("warning: frames 1, 4 under their noise; the dimmest:")
+                && warning[0].contains("0.30 times its noise"),
+            "{t}"
+        );
+        assert!(!frame_table(&rows[1..3]).contains("warning"));
+    }
 }

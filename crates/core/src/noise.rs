@@ -25,19 +25,6 @@ impl DataWeights {
     }
 }
 
-/// [`NoiseModel::mean_snr`] of a raw frame when the camera's noise model and a dark frame are
-/// both known (None otherwise: a linear frame, or a camera never characterised).
-pub fn frame_snr(
-    noise: Option<&NoiseModel>,
-    dark_flat: Option<&DarkFlat>,
-    raw: &Cube,
-) -> Result<Option<f64>> {
-    match (noise, dark_flat) {
-        (Some(nm), Some(df)) => nm.mean_snr(raw, &df.dark).map(Some),
-        _ => Ok(None),
-    }
-}
-
 /// The warning for a frame whose mean signal is under its noise ([`NoiseModel::mean_snr`]
 /// below 1): shown by the twin's reports and by `specmux reconstruct`.
 pub fn snr_warning(mean_snr: f64) -> Option<String> {

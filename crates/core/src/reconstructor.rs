@@ -214,6 +214,8 @@ pub struct Reconstructor {
     gains: Option<Vec<f64>>,
     /// The noise model the joint method weighs its data term by (None: ω = 1).
     noise: Option<NoiseModel>,
+    /// The design's camera noise model, whatever the method (the frame's SNR).
+    camera: Option<NoiseModel>,
     /// What `method = "auto"` picked and why (None for the other methods).
     pub auto: Option<Choice>,
     pub unmixer: Unmixer,
@@ -339,6 +341,7 @@ impl Reconstructor {
             joint,
             gains: design.output_gains.clone(),
             noise,
+            camera: design.noise,
             auto: None,
             unmixer: unmixer(cfg, design).map_err(|e| {
                 e.within(
@@ -356,6 +359,15 @@ impl Reconstructor {
     /// The camera noise model the joint method weighs its data term by (None: ω = 1).
     pub fn joint_noise(&self) -> Option<&NoiseModel> {
         self.noise.as_ref()
+    }
+
+    /// The raw frame's mean signal over its noise ([`NoiseModel::mean_snr`]) when the design
+    /// has the camera's noise model and the calibration a dark frame; None otherwise.
+    pub fn frame_snr(&self, raw: &Cube) -> Result<Option<f64>> {
+        match (&self.camera, &self.calibration.dark_flat) {
+            (Some(nm), Some(df)) => nm.mean_snr(raw, &df.dark).map(Some),
+            _ => Ok(None),
+        }
     }
 
     /// The whole chain on one frame: linearise, demultiplex, de-alias (on what each pattern

@@ -8,7 +8,7 @@ use crate::experiment::PyExperiment;
 use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use specmux_core::noise::{frame_snr, snr_warning};
+use specmux_core::noise::snr_warning;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_report::commands::{frame_calibration, frame_experiment, Measured};
 use specmux_twin::scene::Materials;
@@ -57,10 +57,8 @@ pub fn reconstruct<'py>(
             key: "calibration",
         });
         let cal = frame_calibration(&e, &rig, &materials, measured)?;
-        let design = rig.design();
-        let snr = frame_snr(design.noise.as_ref(), cal.dark_flat.as_ref(), &frame)?;
-        let recon = Reconstructor::new(&e.reconstruct, &design, &cal, &e.file)?;
-        Ok((recon.run(&frame, None)?, cal, snr))
+        let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
+        Ok((recon.run(&frame, None)?, cal, recon.frame_snr(&frame)?))
     })?
     .map_err(err)?;
     if let Some(w) = snr.and_then(snr_warning) {

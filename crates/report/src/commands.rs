@@ -669,8 +669,7 @@ pub fn reconstruct(
     if let Some(choice) = &recon.auto {
         say!(text, "auto: {}", choice.reason);
     }
-    let mean_snr =
-        specmux_core::noise::frame_snr(design.noise.as_ref(), cal.dark_flat.as_ref(), &frame)?;
+    let mean_snr = recon.frame_snr(&frame)?;
     let warnings: Vec<String> = mean_snr
         .and_then(specmux_core::noise::snr_warning)
         .into_iter()

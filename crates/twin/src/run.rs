@@ -258,8 +258,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
         None => None,
     };
-    let dark_flat = recon.calibration.dark_flat.as_ref();
-    let snr = specmux_core::noise::frame_snr(rig.noise.as_ref(), dark_flat, &sim.frame)?;
+    let snr = recon.frame_snr(&sim.frame)?;
     let frame = FrameStats::of(&sim.frame, saturation, snr);
     let error_budget = error_budget(exp, &rig, &sim.channels)?;
     let basis = BasisReport {
