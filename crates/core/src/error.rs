@@ -61,6 +61,22 @@ pub const UNNAMED_FILE: &str = "optics";
 /// Result alias for the crate.
 pub type Result<T> = std::result::Result<T, Error>;
 
+/// `v` within `range`, or the configuration error naming `file`'s `key` and `v`:
+/// "must be START to END {unit}" (`unit` may carry a note: "pixels (as scene.size)").
+pub fn check_count(
+    file: &str,
+    key: &str,
+    v: usize,
+    range: std::ops::RangeInclusive<usize>,
+    unit: &str,
+) -> Result<()> {
+    if range.contains(&v) {
+        return Ok(());
+    }
+    let why = format!("must be {} to {} {unit}", range.start(), range.end());
+    Err(Error::config(file, key, v, &why))
+}
+
 impl Error {
     /// Shorthand for a configuration error.
     pub fn config(file: &str, key: &str, value: impl std::fmt::Display, reason: &str) -> Self {

@@ -13,6 +13,7 @@ use nalgebra::DMatrix;
 use serde::de::IntoDeserializer;
 use serde::{Deserialize, Serialize};
 use specmux_core::demux::WindowShape;
+use specmux_core::error::check_count;
 use specmux_core::spectral::Library;
 use specmux_core::unmix::curvature;
 use specmux_core::{Error, Result};
@@ -204,14 +205,7 @@ fn parse_window(s: &str) -> Result<WindowShape> {
 
 /// Check the arguments; the error names the option and the value.
 fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
-    if !(16..=4096).contains(&a.size) {
-        return Err(Error::config(
-            "--size",
-            "size",
-            a.size,
-            "must be 16 to 4096 pixels",
-        ));
-    }
+    check_count("--size", "size", a.size, 16..=4096, "pixels")?;
     if let Some(c) = a.crop.iter().find(|c| !(**c > 0.0 && **c <= 0.5)) {
         return Err(Error::config("--crop", "crop", c, "must be in (0, 0.5]"));
     }
@@ -223,13 +217,15 @@ fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
             "must be in [0, 1]",
         ));
     }
-    crate::count_in(
+    let per_crop = "designed layouts per crop";
+    check_count(
         "--candidates",
+        "candidates",
         a.candidates,
         1..=100,
-        "designed layouts per crop",
+        per_crop,
     )?;
-    crate::count_in("--carriers", j, 1..=16, "carriers")
+    check_count("--carriers", "carriers", j, 1..=16, "carriers")
 }
 
 /// Predicted scores of a layout as a candidate (simulations filled in later).

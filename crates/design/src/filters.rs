@@ -8,6 +8,7 @@ use crate::criteria::{Evaluator, NoiseModel, Scores, CRITERIA};
 use crate::search::{self, Ranked};
 use crate::{plot, scenes};
 use serde::Serialize;
+use specmux_core::error::check_count;
 use specmux_core::spectral::Library;
 use specmux_core::{Error, Result};
 use specmux_report::progress;
@@ -181,7 +182,7 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
             "must be positive",
         ));
     }
-    crate::count_in("--top", a.top, 1..=1000, "sets")?;
+    check_count("--top", "top", a.top, 1..=1000, "sets")?;
     let t0 = Instant::now();
     let base = base_experiment(a.experiment.as_deref())?;
     let s = setup(a, &base, lib)?;

@@ -22,26 +22,6 @@ pub mod scenes;
 pub mod search;
 mod small;
 
-/// A count option within `range`, or the one-line refusal naming `--option`, its key and value
-/// ("must be 1 to 100 {what}").
-fn count_in(
-    option: &str,
-    v: usize,
-    range: std::ops::RangeInclusive<usize>,
-    what: &str,
-) -> specmux_core::Result<()> {
-    if range.contains(&v) {
-        return Ok(());
-    }
-    let why = format!("must be {} to {} {what}", range.start(), range.end());
-    Err(specmux_core::Error::config(
-        option,
-        option.trim_start_matches('-'),
-        v,
-        &why,
-    ))
-}
-
 /// `specmux design …`: the two design problems of the rig.
 #[derive(clap::Subcommand)]
 pub enum DesignCommand {

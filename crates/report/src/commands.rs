@@ -1,6 +1,7 @@
 //! One function per CLI command: run the library, write the files, return the text to print.
 
 use specmux_core::calibration::{Calibration, CalibrationFrames};
+use specmux_core::error::check_count;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::{Grid, Library};
 use specmux_core::unmix::UnmixStats;
@@ -67,9 +68,8 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     if source.contains(':') {
         return refuse(&format!("{source} takes its size from the file"));
     }
-    if !specmux_twin::scene::config::SIDE_PX.contains(&n) {
-        return refuse("must be 16 to 8192 pixels (as scene.size)");
-    }
+    let sides = specmux_twin::scene::config::SIDE_PX;
+    check_count("--size", "size", n, sides, "pixels (as scene.size)")?;
     exp.scene.size = [n, n];
     let gap = &exp.reconstruct.gap;
     if gap.method == specmux_core::gap::Method::Fourier {
@@ -489,14 +489,14 @@ pub fn ptc(
     lib: &Library,
 ) -> Result<String> {
     let mut text = String::new();
-    if !specmux_twin::scene::config::SIDE_PX.contains(&size) {
-        return Err(Error::config(
-            "--size",
-            "size",
-            size,
-            "must be 16 to 8192 pixels (the side of the test frames)",
-        ));
-    }
+    let sides = specmux_twin::scene::config::SIDE_PX;
+    check_count(
+        "--size",
+        "size",
+        size,
+        sides,
+        "pixels (the side of the test frames)",
+    )?;
     let cfg = match scene {
         Some(s) => experiment_for(s, None)?.rig.sensor.unwrap_or_default(),
         None => specmux_twin::sensor::SensorConfig::default(),

@@ -8,7 +8,8 @@ use crate::multiplex::multiplex;
 use crate::sensor::Sensor;
 use serde::{Deserialize, Serialize};
 use specmux_core::calibration::CalibrationFrames;
-use specmux_core::{Cube, Error, Result};
+use specmux_core::error::check_count;
+use specmux_core::{Cube, Result};
 
 /// Where the reconstruction's calibration comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -43,23 +44,14 @@ impl Default for CaptureConfig {
 
 impl CaptureConfig {
     pub fn validate(&self, f: &str) -> Result<()> {
-        if !(1..=1024).contains(&self.frames) {
-            return Err(Error::config(
-                f,
-                "calibration.frames",
-                self.frames,
-                "must be 1 to 1024 frames",
-            ));
-        }
-        if !(1..=64).contains(&self.search_bins) {
-            return Err(Error::config(
-                f,
-                "calibration.search_bins",
-                self.search_bins,
-                "must be 1 to 64 bins",
-            ));
-        }
-        Ok(())
+        check_count(f, "calibration.frames", self.frames, 1..=1024, "frames")?;
+        check_count(
+            f,
+            "calibration.search_bins",
+            self.search_bins,
+            1..=64,
+            "bins",
+        )
     }
 }
 

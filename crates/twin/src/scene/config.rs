@@ -1,6 +1,7 @@
 //! The scene's configuration (`[scene]`): what is imaged, its size and its band grid.
 
 use serde::{Deserialize, Serialize};
+use specmux_core::error::check_count;
 use specmux_core::spectral::Grid;
 use specmux_core::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -99,14 +100,7 @@ impl SceneConfig {
     /// the value.
     pub fn validate(&self, f: &str) -> Result<()> {
         for (k, &n) in self.size.iter().enumerate() {
-            if !SIDE_PX.contains(&n) {
-                return Err(Error::config(
-                    f,
-                    &format!("scene.size[{k}]"),
-                    n,
-                    "must be 16 to 8192 pixels",
-                ));
-            }
+            check_count(f, &format!("scene.size[{k}]"), n, SIDE_PX, "pixels")?;
         }
         self.validate_motion(f)?;
         let [lo, hi, step] = self.wavelengths_nm;
