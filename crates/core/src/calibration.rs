@@ -85,7 +85,8 @@ impl MeasuredCarrier {
 pub struct DarkFlat {
     pub dark: Cube,
     pub flat: Cube,
-    /// Exposures each of the two frames is the mean of (their own noise is 1/N of one frame's).
+    /// Exposures each of the two frames is the mean of (their own noise is 1/N of one frame's;
+    /// 0 is read as 1 by the noise weights).
     pub frames_averaged: usize,
 }
 
@@ -139,7 +140,7 @@ impl Calibration {
             (Some(d), Some(f)) => Some(DarkFlat {
                 dark: d.clone(),
                 flat: f.clone(),
-                frames_averaged: frames.frames_averaged.max(1),
+                frames_averaged: frames.frames_averaged,
             }),
             (None, None) => None,
             _ => {

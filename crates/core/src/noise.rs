@@ -124,9 +124,7 @@ impl NoiseModel {
             saturated,
         })
     }
-}
 
-impl NoiseModel {
     /// The raw frame's mean signal above `dark` over the noise of a pixel at that signal,
     /// mean(raw − dark)/√(σ_y.dark² + K·max(mean, 0)): below about 1 a single frame says little
     /// more than the prior does, and a reconstruction of it should say so.
