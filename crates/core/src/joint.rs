@@ -1961,7 +1961,7 @@ mod tests {
     }
 
     /// The weights' units do not matter: ω and 10⁻³·ω (a camera's 1/DN² against unit
-    /// weights) give the same α, λ and steps, and Σωr² scales with them. Before the weights
+    /// weights) give the same α and λ, and Σωr² scales with them. Before the weights
     /// were taken over their mean, λ followed mean ω but the spectral prior did not, so DN-unit
     /// noise weights smoothed the spectra 10³ times harder than unit ones.
     #[test]
