@@ -11,7 +11,8 @@ use crate::error::{GpuError, Result};
 use crate::gap;
 use crate::mix::GpuMix;
 use specmux_core::joint::{rebalances_before, reweights_before, Joint, JointStats, SpectralPrior};
-use specmux_core::Cube;
+use specmux_core::noise::DataWeights;
+use std::sync::Mutex;
 
 /// Threads per workgroup of shaders/joint.wgsl.
 const WORKGROUP: u32 = 256;
@@ -80,13 +81,28 @@ pub struct GpuJoint {
     reweight: Vec<Launch>,
     /// The pixel costs at the current α (the objective after the last step).
     cost: Launch,
+    /// ωr² per pixel and its sum appended to the residual list (the residual ratio's sum).
+    residual: [Launch; 3],
+    /// What the stats need of the data weights last set.
+    weights: Mutex<WeightsInfo>,
     non_finite: Launch,
     cube: GpuMix,
     clip: Launch,
     channels: GpuMix,
     b: Buffers,
-    /// The objective list, the scalars' header, the extremes and the counter, for the host.
+    /// The objective list, the scalars' header, the extremes, the counter and the residual
+    /// list, for the host.
     staging: wgpu::Buffer,
+}
+
+/// The data weights as the stats report them: the mean ω the tables were divided by, the
+/// pixels with ω > 0 and the saturated ones, and whether weights were set at all.
+#[derive(Clone, Copy, Debug)]
+struct WeightsInfo {
+    scale: f64,
+    positive: usize,
+    saturated: usize,
+    set: bool,
 }
 
 impl GpuJoint {
@@ -111,6 +127,7 @@ impl GpuJoint {
             )));
         }
         let b = Buffers::new(ctx, joint);
+        let gm = gap::module(ctx);
         let params = params(joint);
         let uniform = ctx.uniform("joint params", &params);
         let module = ctx.module("joint", &source(j, t.padded_bands));
@@ -126,7 +143,6 @@ impl GpuJoint {
             (4, &b.tab),
             (5, &b.state),
         ];
-        let gm = gap::module(ctx);
         let mean = |input, planes: usize, list| {
             let scale = 1.0 / (npx * planes) as f64;
             gap::abs_sum(ctx, &gm, input, (npx, planes), scale, &b.partials, list)
@@ -187,6 +203,7 @@ impl GpuJoint {
                 "primal",
                 &[
                     (1, &b.rig),
+                    (2, frame),
                     (3, &b.scalars),
                     (4, &b.tab),
                     (5, &b.state),
@@ -196,27 +213,51 @@ impl GpuJoint {
             ),
             reweight,
             cost: launch("objective", &joined(&common, &[(7, &b.cost)]), pixels),
+            residual: {
+                let [sum, finish] =
+                    gap::abs_sum(ctx, &gm, &b.cost, (npx, 1), 1.0, &b.partials, &b.residual);
+                let bound = [
+                    (1, &b.rig),
+                    (2, frame),
+                    (4, &b.tab),
+                    (5, &b.state),
+                    (7, &b.cost),
+                ];
+                let kernel = launch("residual", &bound, pixels);
+                [kernel, sum, finish]
+            },
+            weights: Mutex::new(WeightsInfo {
+                scale: 1.0,
+                positive: npx,
+                saturated: 0,
+                set: false,
+            }),
             non_finite: gap::non_finite(ctx, &gm, &b.state, (npx, j), &b.counter),
             cube: GpuMix::into(ctx, &scaled_rows(t.basis, gains), &b.state, npx, cube)?,
             clip: launch("clip", &[(8, cube), (9, &b.extremes)], pixels),
             channels: GpuMix::new(ctx, &scaled_rows(t.system, &ones), &b.state, npx)?,
             staging: ctx.readback(
                 "joint staging",
-                b.objective.size() + 4 * SCALARS as u64 + 12,
+                b.objective.size() + 4 * SCALARS as u64 + 12 + b.residual.size(),
             ),
             b,
         };
-        joint.write_weights(ctx, &vec![1.0; npx]);
+        joint.write_weights(ctx, &vec![1.0; npx], &vec![false; npx], false);
         Ok(joint)
     }
 
-    /// Per-pixel data weights ω (one plane, finite, ≥ 0; the CPU's `start(.., Some(ω))`),
-    /// kept for every later frame.
-    pub fn set_weights(&self, ctx: &GpuContext, omega: &Cube) -> Result<()> {
-        if omega.planes != 1 || omega.pixels() != self.npx {
+    /// Per-pixel data weights ω (one plane, finite, ≥ 0) and the saturated pixels (the CPU's
+    /// `start(.., Some(weights))`), kept for every later frame.
+    pub fn set_weights(&self, ctx: &GpuContext, weights: &DataWeights) -> Result<()> {
+        let omega = &weights.omega;
+        if omega.planes != 1 || omega.pixels() != self.npx || weights.saturated.len() != self.npx {
             return Err(GpuError::Shape(format!(
-                "joint: weights {}×{}×{} for {} pixels",
-                omega.width, omega.height, omega.planes, self.npx
+                "joint: weights {}×{}×{} and {} saturation flags for {} pixels",
+                omega.width,
+                omega.height,
+                omega.planes,
+                weights.saturated.len(),
+                self.npx
             )));
         }
         if omega.data.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
@@ -229,18 +270,33 @@ impl GpuJoint {
                 "joint: every data weight is zero; there is no measurement to fit".into(),
             ));
         }
-        self.write_weights(ctx, &omega.data);
+        self.write_weights(ctx, &omega.data, &weights.saturated, true);
         Ok(())
     }
 
     /// ω over its mean into its table, as the CPU's `Joint::start` takes it (so λ and the
-    /// spectral prior keep their balance against the data whatever the weights' units).
-    fn write_weights(&self, ctx: &GpuContext, omega: &[f32]) {
-        let at = ((self.j + 3) * self.npx * 4) as u64;
+    /// spectral prior keep their balance against the data whatever the weights' units), and
+    /// the saturation flags into theirs.
+    /// `set`: the weights are the caller's (reported as such), not the uniform start.
+    fn write_weights(&self, ctx: &GpuContext, omega: &[f32], saturated: &[bool], set: bool) {
+        let plane = |k: usize| (k * self.npx * 4) as u64;
         let mean = omega.iter().map(|&v| v as f64).sum::<f64>() / omega.len() as f64;
         let scaled: Vec<f32> = omega.iter().map(|&v| (v as f64 / mean) as f32).collect();
-        ctx.queue
-            .write_buffer(&self.b.tab, at, bytemuck::cast_slice(&scaled));
+        let flags: Vec<f32> = saturated.iter().map(|&s| s as u8 as f32).collect();
+        let q = &ctx.queue;
+        q.write_buffer(
+            &self.b.tab,
+            plane(self.j + 3),
+            bytemuck::cast_slice(&scaled),
+        );
+        q.write_buffer(&self.b.tab, plane(self.j + 5), bytemuck::cast_slice(&flags));
+        let mut info = self.weights.lock().unwrap_or_else(|e| e.into_inner());
+        *info = WeightsInfo {
+            scale: mean,
+            positive: omega.iter().filter(|&&v| v > 0.0).count(),
+            saturated: saturated.iter().filter(|&&s| s).count(),
+            set,
+        };
     }
 
     /// The state buffer: its first J planes are α (the seed goes there before `encode`).
@@ -284,6 +340,7 @@ impl GpuJoint {
             &self.b.counter,
             &self.b.rw,
             &self.b.bal,
+            &self.b.residual,
         ] {
             enc.clear_buffer(b, 0, None);
         }
@@ -325,6 +382,7 @@ impl GpuJoint {
             self.cube.record(&mut cp);
             self.clip.record(&mut cp);
             self.channels.record(&mut cp);
+            self.residual.iter().for_each(|l| l.record(&mut cp));
         }
         let o = self.b.objective.size();
         let s = 4 * SCALARS as u64;
@@ -332,25 +390,30 @@ impl GpuJoint {
         enc.copy_buffer_to_buffer(&self.b.scalars, 0, &self.staging, o, s);
         enc.copy_buffer_to_buffer(&self.b.extremes, 0, &self.staging, o + s, 8);
         enc.copy_buffer_to_buffer(&self.b.counter, 0, &self.staging, o + s + 8, 4);
+        let r = self.b.residual.size();
+        enc.copy_buffer_to_buffer(&self.b.residual, 0, &self.staging, o + s + 12, r);
     }
 
     /// After the submission that held `encode` (or `encode_finish`): the objective at the seed
-    /// and after each step (untraced: after the last only), λ, τ, σ and the cube's violation, or an error when α holds a NaN
-    /// or an infinite value, as on the CPU. `seconds` is 0: the run is part of one submission.
+    /// and after each step (untraced: after the last only), λ, τ, σ, the cube's violation and
+    /// the residual ratio Σωr²/#{ω > 0} (ω in the units set), or an error when α holds a NaN or
+    /// an infinite value, as on the CPU. `seconds` is 0: the run is part of one submission.
     pub fn stats(&self, ctx: &GpuContext) -> Result<JointStats> {
         let mut w = vec![0u32; (self.staging.size() / 4) as usize];
         ctx.read_into(&self.staging, &mut w)?;
         let f = |i: usize| f32::from_bits(w[i]) as f64;
-        let tail = w.len() - SCALARS - 3;
-        let non_finite = w[w.len() - 1];
+        // objective list | scalars | extremes (2) | counter | residual list (count, sum).
+        let tail = w.len() - SCALARS - 5;
+        let (hi, neg) = (f(tail + SCALARS), f(tail + SCALARS + 1));
+        let non_finite = w[tail + SCALARS + 2];
         if non_finite > 0 {
             return Err(GpuError::Numerical(format!(
                 "joint: {non_finite} non-finite coefficients after {} iterations",
                 w[0].saturating_sub(1)
             )));
         }
-        let (hi, neg) = (f(w.len() - 3), f(w.len() - 2));
         let n = (w[0] as usize).min(tail - 1);
+        let info = *self.weights.lock().unwrap_or_else(|e| e.into_inner());
         Ok(JointStats {
             iterations: match self.trace {
                 true => n.saturating_sub(1),
@@ -364,6 +427,9 @@ impl GpuJoint {
             prior: "tv".into(),
             spectral_prior: self.spectral_prior.name().into(),
             reweight_rounds: self.reweights,
+            residual_ratio: f(tail + SCALARS + 4) * info.scale / info.positive.max(1) as f64,
+            noise_weights: info.set,
+            saturated_pixels: info.saturated,
             ..Default::default()
         })
     }
@@ -393,7 +459,7 @@ impl GpuJoint {
 /// The buffers of one rig's run: shaders/joint.wgsl's bindings and the sums' partials.
 struct Buffers {
     rig: wgpu::Buffer,
-    /// m | t | c | k | ω | the TV weight.
+    /// m | t | c | k | ω | the TV weight | the saturation flag.
     tab: wgpu::Buffer,
     /// α | ᾱ | qx | qy.
     state: wgpu::Buffer,
@@ -409,6 +475,8 @@ struct Buffers {
     rw: wgpu::Buffer,
     /// The means of |α| the steps are balanced by: a count, the seed's, the rebalance's.
     bal: wgpu::Buffer,
+    /// Σωr² at the end of a run: a count, then the sum.
+    residual: wgpu::Buffer,
 }
 
 impl Buffers {
@@ -420,7 +488,7 @@ impl Buffers {
         let groups = gap::count(linear_groups(npx * t.basis_len, WORKGROUP));
         Buffers {
             rig: ctx.storage_init("joint rig tables", &rig_tables(joint)),
-            tab: ctx.storage("joint prox tables", (j + 5) * plane),
+            tab: ctx.storage("joint prox tables", (j + 6) * plane),
             state: ctx.storage("joint state", 4 * j * plane),
             r: ctx.storage("joint constraint dual", (t.padded_bands as u64 + 1) * plane),
             cost: ctx.storage("joint pixel costs", plane),
@@ -434,6 +502,7 @@ impl Buffers {
                 4 * (t.config.reweight_rounds as u64 + 2),
             ),
             bal: ctx.storage("joint alpha means", 4 * 3),
+            residual: ctx.storage("joint residual", 4 * 2),
         }
     }
 }

@@ -13,6 +13,7 @@ use crate::unmix::GpuUnmixer;
 use specmux_core::calibration::DarkFlat;
 use specmux_core::gap::GapStats;
 use specmux_core::joint::{Joint, JointStats, Prior, WeightRule};
+use specmux_core::noise::NoiseModel;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::unmix::UnmixStats;
 use specmux_core::Cube;
@@ -39,6 +40,9 @@ pub struct GpuReconstructor {
     /// The joint method: the seed α₀ = H⁻¹Fᵀx̂ (a mix of the channels into α's planes) and the
     /// iterations, which write the cube into the unmixer's output (None for the other methods).
     joint: Option<(GpuMix, GpuJoint)>,
+    /// The camera's noise model the joint method weighs each frame's data term by (None: ω = 1),
+    /// and the experiment file its errors name.
+    noise: Option<(NoiseModel, String)>,
     dark_flat: Option<DarkFlat>,
     /// The channels the unmixing reads, copied for `demultiplex` and `dealias`.
     channels_staging: wgpu::Buffer,
@@ -66,7 +70,7 @@ impl GpuReconstructor {
         let joint = match &recon.joint {
             None => None,
             Some(j) => {
-                gpu_joint_supported(j, recon)?;
+                gpu_joint_supported(j)?;
                 let t = recon.unmixer.tables();
                 let gj = GpuJoint::new(ctx, j, demux.frame(), unmix.output(), t.gains)?;
                 let c = recon.unmixer.channels();
@@ -86,16 +90,26 @@ impl GpuReconstructor {
             mix,
             unmix,
             joint,
+            noise: (recon.joint.as_ref())
+                .zip(recon.joint_noise())
+                .map(|(j, nm)| (*nm, j.file().to_string())),
             dark_flat: recon.calibration.dark_flat.clone(),
         })
     }
 
-    /// Linearise (host) and upload a raw frame.
+    /// Linearise (host) and upload a raw frame, with the joint method's noise weights of it.
     fn upload(&self, ctx: &GpuContext, frame: &Cube) -> Result<()> {
-        match &self.dark_flat {
-            Some(df) => self.demux.upload(ctx, &df.apply(frame)?),
-            None => self.demux.upload(ctx, frame),
+        let linear = match &self.dark_flat {
+            Some(df) => std::borrow::Cow::Owned(df.apply(frame)?),
+            None => std::borrow::Cow::Borrowed(frame),
+        };
+        if let (Some((nm, file)), Some((_, j))) = (&self.noise, &self.joint) {
+            let weights = nm
+                .weights(frame, &linear, self.dark_flat.as_ref())
+                .map_err(|e| e.within(file, "reconstruct.joint.noise_weights", true))?;
+            j.set_weights(ctx, &weights)?;
         }
+        self.demux.upload(ctx, &linear)
     }
 
     /// The buffer of channel planes the unmixing reads (the joint method's Fα after `dealias`).
@@ -212,23 +226,21 @@ impl GpuReconstructor {
     }
 }
 
-/// The GPU runs the joint method's TV prior (plain or reweighted) with a fixed λ and ω = 1;
-/// the plug-and-play prior, the discrepancy rule and noise weights are CPU-only and refused
-/// here with the key to change.
-fn gpu_joint_supported(j: &Joint, recon: &Reconstructor) -> Result<()> {
+/// The GPU runs the joint method's TV prior (plain or reweighted) with a fixed λ, with or
+/// without noise weights; the plug-and-play prior and the discrepancy rule are CPU-only and
+/// refused here with the key to change.
+fn gpu_joint_supported(j: &Joint) -> Result<()> {
     let cfg = j.tables().config;
     let unsupported = if cfg.prior != Prior::Tv {
         Some("reconstruct.joint.prior = \"pnp\"")
     } else if cfg.weight_rule != WeightRule::Fixed {
         Some("reconstruct.joint.weight_rule = \"discrepancy\"")
-    } else if recon.joint_noise().is_some() {
-        Some("reconstruct.joint.noise_weights = true")
     } else {
         None
     };
     match unsupported {
         Some(what) => Err(GpuError::Unsupported(format!(
-            "{what} runs on the CPU only (the GPU runs the TV prior with a fixed λ and uniform weights)"
+            "{what} runs on the CPU only (the GPU runs the TV prior with a fixed λ)"
         ))),
         None => Ok(()),
     }

@@ -266,20 +266,26 @@ fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
         .collect();
     let omega = Cube::from_vec(W, H, 1, omega).unwrap();
     let gains: Vec<f64> = (0..BANDS).map(|k| 0.5 + k as f64 / BANDS as f64).collect();
-    let (alpha, cpu) = {
-        let weights = DataWeights::new(omega.clone());
+    // Every seventh pixel read as saturated: its data term one-sided.
+    let weights = DataWeights {
+        omega: omega.clone(),
+        saturated: (0..W * H).map(|p| p % 7 == 3).collect(),
+    };
+    let (alpha, cpu, ratio) = {
         let mut st = joint.start(&frame, &seed, Some(&weights)).unwrap();
         let mut objective: Vec<f64> = (0..iterations).map(|_| joint.step(&mut st)).collect();
         objective.push(joint.objective(&mut st));
+        let (sum, positive) = joint.weighted_residual(&st);
         (
             Cube::from_vec(W, H, J, planes(&st.alpha, J)).unwrap(),
             objective,
+            sum / positive as f64,
         )
     };
     let (cube, violation) = joint.cube(&alpha, Some(&gains)).unwrap();
     let channels = joint.channels(&alpha).unwrap();
     let (g, cube_buf) = gpu_solver(&ctx, &joint, &frame, &seed, &gains);
-    g.set_weights(&ctx, &omega).unwrap();
+    g.set_weights(&ctx, &weights).unwrap();
     // Twice through the same buffers (the seed written again: α is the iterate): the second
     // run's answer is the one checked.
     for _ in 0..2 {
@@ -308,6 +314,16 @@ fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
     assert!(
         cpu[iterations] < 0.5 * cpu[0],
         "the run must do something: {cpu:?}"
+    );
+    let e = (stats.residual_ratio - ratio).abs() / ratio;
+    eprintln!(
+        "residual ratio GPU {:.6e}, CPU {ratio:.6e}, relative {e:.1e}; saturated {}",
+        stats.residual_ratio, stats.saturated_pixels
+    );
+    assert!(e < 1e-4, "residual ratio {e:.2e}");
+    assert!(
+        stats.noise_weights
+            && stats.saturated_pixels == weights.saturated.iter().filter(|&&s| s).count()
     );
     let got_cube: Vec<f32> = ctx.read(&cube_buf, BANDS * W * H).unwrap();
     let e = rel(&got_cube, &cube.data);
@@ -432,9 +448,14 @@ fn bad_weights_are_refused_and_a_non_finite_seed_is_an_error() {
     let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
     let mut omega = Cube::zeros(W, H, 1);
     omega.data[5] = -1.0;
-    let e = g.set_weights(&ctx, &omega).unwrap_err().to_string();
+    let e = g
+        .set_weights(&ctx, &DataWeights::new(omega))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("weight"), "{e}");
-    assert!(g.set_weights(&ctx, &Cube::zeros(W, 2, 1)).is_err());
+    assert!(g
+        .set_weights(&ctx, &DataWeights::new(Cube::zeros(W, 2, 1)))
+        .is_err());
     seed.data[17] = f32::NAN;
     ctx.queue
         .write_buffer(g.alpha_buffer(), 0, bytemuck::cast_slice(&seed.data));

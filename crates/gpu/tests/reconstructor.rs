@@ -88,6 +88,19 @@ fn check_within(toml: &str, channels: f64) {
         );
         assert_eq!(g.objective.len(), c.objective.len());
         assert!(((gl - cl) / cl).abs() < 1e-4, "objective {gl} against {cl}");
+        let (gr, cr) = (g.residual_ratio, c.residual_ratio);
+        eprintln!(
+            "residual ratio GPU {gr:.6e}, CPU {cr:.6e}; noise weights {}; saturated pixels {} and {}",
+            c.noise_weights, g.saturated_pixels, c.saturated_pixels
+        );
+        assert!(
+            ((gr - cr) / cr).abs() < 1e-3,
+            "residual ratio {gr} against {cr}"
+        );
+        assert_eq!(
+            (g.noise_weights, g.saturated_pixels),
+            (c.noise_weights, c.saturated_pixels)
+        );
     }
     let gx = gpu_recon.demultiplex(&ctx, &sim.frame).unwrap();
     assert!(metrics::compare(&cpu.xhat, &gx).unwrap().nrmse < 2e-5);
@@ -136,13 +149,29 @@ fn joint_dead_leaves_with_timing() {
     );
 }
 
+/// Noise weights with saturated pixels (an overexposed camera: their data term one-sided),
+/// as on the CPU; the CPU's run must see some saturated pixels and not all.
+#[test]
+fn joint_with_noise_weights_and_saturated_pixels() {
+    let toml = "[scene]\nsize = [64, 64]\n[rig.timing]\n[rig.sensor]\nelectrons_at_full_scale = 60000\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 40\nnoise_weights = true\n";
+    let (sim, recon) = simulated(toml);
+    let stats = recon.run(&sim.frame, None).unwrap().joint.unwrap();
+    let n = 64 * 64;
+    assert!(stats.noise_weights, "{stats:?}");
+    assert!(
+        stats.saturated_pixels > n / 100 && stats.saturated_pixels < n / 2,
+        "{} of {n} saturated",
+        stats.saturated_pixels
+    );
+    check_within(toml, 1e-4);
+}
+
 /// The joint settings that run on the CPU only are refused by name, not run differently.
 #[test]
 fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
     let Some(ctx) = common::context() else { return };
     for (keys, named) in [
         ("prior = \"pnp\"\n", "reconstruct.joint.prior"),
-        ("noise_weights = true\n", "reconstruct.joint.noise_weights"),
         (
             "noise_weights = true\nweight_rule = \"discrepancy\"\n",
             "reconstruct.joint.weight_rule",

@@ -33,7 +33,8 @@ const LANES: u32 = 8u;
 // `sc`, per frame: [count, mean|y|] (a list the sum appends to), –, λ, τ, σ, –, –,
 // then M = (I + τη'Q)⁻¹ (J × J, column-major as on the CPU).
 // `tab`, per frame: m = M a (J planes) | t = τωy | c = τω/(1 + τω aᵀm) | k = aᵀm | ω | the TV
-// weight w (1 unless reweighted).
+// weight w (1 unless reweighted) | the saturation flag (1 where the pixel reads the camera's
+// saturation: its data term is one-sided, the CPU's cap = y).
 // `st`: α | ᾱ | qx | qy (J planes each). `r`: the constraint dual (NBP planes), then the
 // active flag (1 where r ≠ 0 somewhere in the pixel's bands).
 @group(0) @binding(0) var<uniform> prm: Params;
@@ -59,8 +60,9 @@ const ALPHA: u32 = 0u;
 const BAR: u32 = J;
 const QX: u32 = 2u * J;
 const QY: u32 = 3u * J;
-// The TV weight's plane in `tab`.
+// The TV weight's and the saturation flag's planes in `tab`.
 const TVW: u32 = J + 4u;
+const SAT: u32 = J + 5u;
 
 fn at(plane: u32, p: u32) -> u32 {
     return plane * prm.npx + p;
@@ -190,6 +192,18 @@ fn gradient(plane: u32, p: u32, x: u32, row: u32) -> vec2<f32> {
     return d;
 }
 
+// Whether `fit` reaches the reading of a saturated pixel p: its one-sided data term is zero
+// there (the CPU's `fit >= cap`).
+fn capped(p: u32, fit: f32) -> bool {
+    return tab[at(SAT, p)] > 0.5 && fit >= y[p];
+}
+
+// y − fit, or 0 where the pixel is saturated and the fit reaches its reading (the CPU's
+// `data_residual`).
+fn data_residual(p: u32, fit: f32) -> f32 {
+    return select(y[p] - fit, 0.0, capped(p, fit));
+}
+
 // ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖ at pixel p (the CPU's `pixel_cost`, in f32).
 fn pixel_cost(p: u32, x: u32, row: u32) -> f32 {
     var alpha: array<f32, J>;
@@ -204,7 +218,7 @@ fn pixel_cost(p: u32, x: u32, row: u32) -> f32 {
             quad += alpha[i] * eq(i, c) * alpha[c];
         }
     }
-    let e = y[p] - fit;
+    let e = data_residual(p, fit);
     let tv = sc[SC_LAMBDA] * tab[at(TVW, p)] * sqrt(alpha_grad_sq(p, x, row));
     return 0.5 * tab[at(J + 3u, p)] * e * e + 0.5 * quad + tv;
 }
@@ -253,6 +267,22 @@ fn objective(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
         return;
     }
     cost[p] = pixel_cost(p, p % prm.w, p / prm.w);
+}
+
+// ---- residual (per pixel): ω(y − aᵀα)² (one-sided where saturated) into `cost`, for the
+// residual ratio Σωr²/#{ω > 0} (the CPU's `weighted_residual`).
+@compute @workgroup_size(256)
+fn residual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    var fit = 0.0;
+    for (var j = 0u; j < J; j++) {
+        fit += rig[at(j, p)] * st[at(ALPHA + j, p)];
+    }
+    let e = data_residual(p, fit);
+    cost[p] = tab[at(J + 3u, p)] * e * e;
 }
 
 // True when min_k (βBᾱ)_k ≥ 0 follows from the per-column extremes of βB alone.
@@ -434,7 +464,7 @@ fn primal(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups
         mtv += tab[at(j, p)] * v[j];
     }
     let t = tab[at(J, p)];
-    let coef = t - tab[at(J + 1u, p)] * (mtv + t * tab[at(J + 2u, p)]);
+    let coef = select(t - tab[at(J + 1u, p)] * (mtv + t * tab[at(J + 2u, p)]), 0.0, capped(p, mtv));
     for (var j = 0u; j < J; j++) {
         let next = mv[j] + coef * tab[at(j, p)];
         st[at(BAR + j, p)] = 2.0 * next - start[j];
