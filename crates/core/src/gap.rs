@@ -7,6 +7,7 @@
 //! timing mixture y = Σ_i Σ_k w_ik x_i ⊙ s̃_k pass `patterns.mix(w)`), so S Sᵀ = diag(Σ_k s_k²)
 //! and the projection is pointwise.
 
+use crate::error::check_count;
 use crate::error::Error;
 use crate::error::Result;
 use crate::tv::TvDenoiser;
@@ -85,22 +86,14 @@ impl GapConfig {
     /// Range checks; errors name `reconstruct.gap.<field>` and the value.
     pub fn validate(&self, file: &str) -> Result<()> {
         let key = |f: &str| format!("reconstruct.gap.{f}");
-        if self.iterations > 100_000 {
-            return Err(Error::config(
-                file,
-                &key("iterations"),
-                self.iterations,
-                "must be 0 to 100000",
-            ));
-        }
-        if !(1..=16).contains(&self.levels) {
-            return Err(Error::config(
-                file,
-                &key("levels"),
-                self.levels,
-                "must be 1 to 16",
-            ));
-        }
+        check_count(
+            file,
+            &key("iterations"),
+            self.iterations,
+            0..=100_000,
+            "iterations",
+        )?;
+        check_count(file, &key("levels"), self.levels, 1..=16, "levels")?;
         if !(self.keep > 0.0 && self.keep <= 1.0) {
             return Err(Error::config(
                 file,

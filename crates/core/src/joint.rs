@@ -10,7 +10,7 @@
 //! dualised, the quadratic's proximal step is per pixel and closed form (Sherman–Morrison on
 //! (I + τη'Q)⁻¹), and τσ‖K‖² < 1 with ‖K‖² ≤ 8 + β²‖B‖² (tested against power iteration).
 
-use crate::error::{Error, Result};
+use crate::error::{check_count, Error, Result};
 use crate::noise::DataWeights;
 use crate::Cube;
 use nalgebra::DMatrix;
@@ -149,15 +149,13 @@ impl JointConfig {
     /// Range checks; errors name `reconstruct.joint.<field>` and the value.
     pub fn validate(&self, file: &str) -> Result<()> {
         let key = |f: &str| format!("reconstruct.joint.{f}");
-        for (field, v) in [
-            ("iterations", self.iterations),
-            ("search_iterations", self.search_iterations),
-            ("pnp_passes", self.pnp_passes),
-            ("reweight_rounds", self.reweight_rounds),
+        for (field, v, unit) in [
+            ("iterations", self.iterations, "iterations"),
+            ("search_iterations", self.search_iterations, "iterations"),
+            ("pnp_passes", self.pnp_passes, "passes"),
+            ("reweight_rounds", self.reweight_rounds, "rounds"),
         ] {
-            if v > 100_000 {
-                return Err(Error::config(file, &key(field), v, "must be 0 to 100000"));
-            }
+            check_count(file, &key(field), v, 0..=100_000, unit)?;
         }
         if !(self.tv_weight.is_finite() && self.tv_weight >= 0.0) {
             return Err(Error::config(

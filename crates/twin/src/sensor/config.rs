@@ -2,6 +2,7 @@
 //! machine-vision camera of the JAI GO-5000 class (the prototype's camera).
 
 use serde::{Deserialize, Serialize};
+use specmux_core::error::check_count;
 use specmux_core::error::Error;
 use specmux_core::error::Result;
 
@@ -156,13 +157,13 @@ impl SensorConfig {
                 );
             }
         }
-        if !(1..=16).contains(&self.bits) {
-            return bad(
-                "bits",
-                self.bits.to_string(),
-                "ADC bit depth must be 1 to 16",
-            );
-        }
+        check_count(
+            file,
+            "rig.sensor.bits",
+            self.bits as usize,
+            1..=16,
+            "bits (ADC depth)",
+        )?;
         if !(self.black_offset_dn >= 0.0 && self.black_offset_dn < self.max_dn()) {
             return bad(
                 "black_offset_dn",
