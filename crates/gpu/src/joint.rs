@@ -10,7 +10,10 @@ use crate::context::{linear_groups, GpuContext, Launch};
 use crate::error::{GpuError, Result};
 use crate::gap;
 use crate::mix::GpuMix;
-use specmux_core::joint::{rebalances_before, reweights_before, Joint, JointStats, SpectralPrior};
+use specmux_core::joint::discrepancy::{self, Search};
+use specmux_core::joint::{
+    rebalances_before, reweights_before, Joint, JointStats, SpectralPrior, WeightRule,
+};
 use specmux_core::noise::DataWeights;
 use std::sync::Mutex;
 
@@ -73,6 +76,13 @@ pub struct GpuJoint {
     /// Σ|α| (two sums), the scalars and M again, the tables for the new τ; empty when
     /// `rebalance` is off.
     rebalance: Vec<Launch>,
+    /// The host's λ taken (the dual rescaled, ᾱ = α), then as `rebalance` (the CPU's
+    /// `set_lambda`).
+    relambda: Vec<Launch>,
+    /// The discrepancy search's iterations per trial (None: λ fixed by its rule).
+    search_iterations: Option<usize>,
+    /// The last search's trials and choice, for the stats.
+    search: Mutex<Option<Search>>,
     dual: Launch,
     /// Σ of the pixel costs appended to the objective list.
     cost_sum: [Launch; 2],
@@ -93,6 +103,8 @@ pub struct GpuJoint {
     /// The objective list, the scalars' header, the extremes, the counter and the residual
     /// list, for the host.
     staging: wgpu::Buffer,
+    /// The residual list of a search trial, for the host.
+    trial_staging: wgpu::Buffer,
 }
 
 /// The data weights as the stats report them: the mean ω the tables were divided by, the
@@ -150,7 +162,7 @@ impl GpuJoint {
         let setup = || {
             launch(
                 "setup",
-                &[(1, &b.rig), (3, &b.scalars), (11, &b.bal)],
+                &[(1, &b.rig), (3, &b.scalars), (11, &b.bal), (12, &b.lam)],
                 [1, 1, 1],
             )
         };
@@ -160,12 +172,20 @@ impl GpuJoint {
             .collect();
         start.push(setup());
         start.push(launch("tables", &joined(&common, &[(6, &b.r)]), pixels));
-        let mut rebalance: Vec<Launch> = Vec::new();
-        if t.config.rebalance {
-            rebalance.extend(mean(&b.state, j, &b.bal));
-            rebalance.push(setup());
-            rebalance.push(launch("retable", &common[..4], pixels));
-        }
+        let balance = || {
+            let mut l: Vec<Launch> = mean(&b.state, j, &b.bal).into_iter().collect();
+            l.push(setup());
+            l.push(launch("retable", &common[..4], pixels));
+            l
+        };
+        let rebalance = if t.config.rebalance {
+            balance()
+        } else {
+            Vec::new()
+        };
+        let bound = [(3, &b.scalars), (5, &b.state), (12, &b.lam)];
+        let mut relambda = vec![launch("relambda", &bound, pixels)];
+        relambda.extend(balance());
         let mut reweight = vec![launch("grad_norm", &[(5, &b.state), (7, &b.cost)], pixels)];
         let scale = 1.0 / npx as f64;
         reweight.extend(gap::abs_sum(
@@ -197,6 +217,10 @@ impl GpuJoint {
             npx,
             start,
             rebalance,
+            relambda,
+            search_iterations: (t.config.weight_rule == WeightRule::Discrepancy)
+                .then_some(t.config.search_iterations),
+            search: Mutex::new(None),
             dual: launch("dual", &joined(&common, &[(6, &b.r), (7, &b.cost)]), pixels),
             cost_sum: gap::abs_sum(ctx, &gm, &b.cost, (npx, 1), 1.0, &b.partials, &b.objective),
             primal: launch(
@@ -240,6 +264,7 @@ impl GpuJoint {
                 "joint staging",
                 b.objective.size() + 4 * SCALARS as u64 + 12 + b.residual.size(),
             ),
+            trial_staging: ctx.readback("joint trial residual", b.residual.size()),
             b,
         };
         joint.write_weights(ctx, &vec![1.0; npx], &vec![false; npx], false);
@@ -314,6 +339,12 @@ impl GpuJoint {
     /// CPU), `encode_finish`.
     pub fn encode(&self, enc: &mut wgpu::CommandEncoder) {
         self.encode_start(enc);
+        self.encode_iterations(enc);
+        self.encode_finish(enc);
+    }
+
+    /// The run's `iterations` steps with their stages (rebalance, reweightings).
+    fn encode_iterations(&self, enc: &mut wgpu::CommandEncoder) {
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
             for it in 0..self.iterations {
@@ -327,12 +358,19 @@ impl GpuJoint {
                 self.primal.record(&mut cp);
             }
         }
-        self.encode_finish(enc);
     }
 
     /// Record the start of a run: the lists cleared, λ, τ, σ, M, the tables, ᾱ = α, q = r = 0;
     /// untraced, also the objective at the seed (traced, the first dual step appends it).
     pub fn encode_start(&self, enc: &mut wgpu::CommandEncoder) {
+        let mut cp = self.record_start(enc);
+        if !self.trace {
+            self.record_objective(&mut cp);
+        }
+    }
+
+    /// The lists and the host's λ cleared, then the start's launches (in the pass returned).
+    fn record_start<'e>(&self, enc: &'e mut wgpu::CommandEncoder) -> wgpu::ComputePass<'e> {
         for b in [
             &self.b.scalars,
             &self.b.objective,
@@ -340,16 +378,95 @@ impl GpuJoint {
             &self.b.counter,
             &self.b.rw,
             &self.b.bal,
-            &self.b.residual,
+            &self.b.lam,
         ] {
             enc.clear_buffer(b, 0, None);
         }
         let mut cp = enc.begin_compute_pass(&Default::default());
         self.start.iter().for_each(|l| l.record(&mut cp));
-        if !self.trace {
-            self.cost.record(&mut cp);
-            self.cost_sum.iter().for_each(|l| l.record(&mut cp));
+        cp
+    }
+
+    /// The objective at the current α appended to its list.
+    fn record_objective(&self, cp: &mut wgpu::ComputePass) {
+        self.cost.record(cp);
+        self.cost_sum.iter().for_each(|l| l.record(cp));
+    }
+
+    /// Whether λ is searched by the discrepancy principle: then a run is
+    /// `encode_search_start`, a submission, `search`, and `encode_after_search`.
+    pub fn searches(&self) -> bool {
+        self.search_iterations.is_some()
+    }
+
+    /// Record the start of a searched run (as `encode_start`, the objective left to the run
+    /// after the search, as on the CPU).
+    pub fn encode_search_start(&self, enc: &mut wgpu::CommandEncoder) {
+        self.record_start(enc);
+    }
+
+    /// After the submission of `encode_search_start`: λ by the discrepancy principle (the
+    /// core's secant search on the residual ratio, each trial `search_iterations` steps warm
+    /// from the last, one submission and read-back each), the choice kept for the run.
+    pub fn search(&self, ctx: &GpuContext) -> Result<Search> {
+        let iterations = self.search_iterations.unwrap_or(0);
+        let info = *self.weights.lock().unwrap_or_else(|e| e.into_inner());
+        if !info.set || info.positive == 0 {
+            return Err(GpuError::Numerical(
+                "joint: the discrepancy principle needs the noise weights ω of a camera noise model (GpuJoint::set_weights)".into(),
+            ));
         }
+        let lambda0 = ctx.read::<f32>(&self.b.scalars, SCALARS)?[3] as f64;
+        let search = discrepancy::secant(lambda0, |lambda| {
+            let sum = self.trial(ctx, lambda, iterations)?;
+            Ok(sum * info.scale / info.positive as f64)
+        })?;
+        self.set_lambda(ctx, search.lambda);
+        *self.search.lock().unwrap_or_else(|e| e.into_inner()) = Some(search.clone());
+        Ok(search)
+    }
+
+    /// The host's λ for the next submission.
+    fn set_lambda(&self, ctx: &GpuContext, lambda: f64) {
+        let v = [lambda as f32];
+        ctx.queue
+            .write_buffer(&self.b.lam, 0, bytemuck::cast_slice(&v));
+    }
+
+    /// One trial of the search: λ set, `iterations` steps from the current state, Σωr².
+    fn trial(&self, ctx: &GpuContext, lambda: f64, iterations: usize) -> Result<f64> {
+        self.set_lambda(ctx, lambda);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        enc.clear_buffer(&self.b.residual, 0, None);
+        {
+            let mut cp = enc.begin_compute_pass(&Default::default());
+            self.relambda.iter().for_each(|l| l.record(&mut cp));
+            for _ in 0..iterations {
+                self.dual.record(&mut cp);
+                self.primal.record(&mut cp);
+            }
+            self.residual.iter().for_each(|l| l.record(&mut cp));
+        }
+        let bytes = self.b.residual.size();
+        enc.copy_buffer_to_buffer(&self.b.residual, 0, &self.trial_staging, 0, bytes);
+        ctx.queue.submit([enc.finish()]);
+        let mut list = [0.0f32; 2];
+        ctx.read_into(&self.trial_staging, &mut list)?;
+        Ok(list[1] as f64)
+    }
+
+    /// Record the run after `search`: the chosen λ taken, the objective there (untraced), the
+    /// iterations with their stages and `encode_finish`.
+    pub fn encode_after_search(&self, enc: &mut wgpu::CommandEncoder) {
+        {
+            let mut cp = enc.begin_compute_pass(&Default::default());
+            self.relambda.iter().for_each(|l| l.record(&mut cp));
+            if !self.trace {
+                self.record_objective(&mut cp);
+            }
+        }
+        self.encode_iterations(enc);
+        self.encode_finish(enc);
     }
 
     /// Record the dual step alone, with the objective at the current α appended to the list
@@ -374,10 +491,11 @@ impl GpuJoint {
     /// Record the end of a run: the final objective, the non-finite check, the cube (clipped,
     /// with its extremes), the channels, and the copies `stats` reads.
     pub fn encode_finish(&self, enc: &mut wgpu::CommandEncoder) {
+        // The residual list holds this run's sum alone (a search's trials used it too).
+        enc.clear_buffer(&self.b.residual, 0, None);
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
-            self.cost.record(&mut cp);
-            self.cost_sum.iter().for_each(|l| l.record(&mut cp));
+            self.record_objective(&mut cp);
             self.non_finite.record(&mut cp);
             self.cube.record(&mut cp);
             self.clip.record(&mut cp);
@@ -430,6 +548,14 @@ impl GpuJoint {
             residual_ratio: f(tail + SCALARS + 4) * info.scale / info.positive.max(1) as f64,
             noise_weights: info.set,
             saturated_pixels: info.saturated,
+            discrepancy: match self.searches() {
+                true => self
+                    .search
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .clone(),
+                false => None,
+            },
             ..Default::default()
         })
     }
@@ -477,6 +603,8 @@ struct Buffers {
     bal: wgpu::Buffer,
     /// Σωr² at the end of a run: a count, then the sum.
     residual: wgpu::Buffer,
+    /// λ set by the host (0: the rule's).
+    lam: wgpu::Buffer,
 }
 
 impl Buffers {
@@ -501,8 +629,12 @@ impl Buffers {
                 "joint reweight means",
                 4 * (t.config.reweight_rounds as u64 + 2),
             ),
-            bal: ctx.storage("joint alpha means", 4 * 3),
+            bal: ctx.storage(
+                "joint alpha means",
+                4 * (3 + discrepancy::MAX_TRIALS as u64 + 1),
+            ),
             residual: ctx.storage("joint residual", 4 * 2),
+            lam: ctx.storage("joint host lambda", 4),
         }
     }
 }

@@ -12,7 +12,7 @@ use crate::mix::GpuMix;
 use crate::unmix::GpuUnmixer;
 use specmux_core::calibration::DarkFlat;
 use specmux_core::gap::GapStats;
-use specmux_core::joint::{Joint, JointStats, Prior, WeightRule};
+use specmux_core::joint::{Joint, JointStats, Prior};
 use specmux_core::noise::NoiseModel;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::unmix::UnmixStats;
@@ -121,20 +121,33 @@ impl GpuReconstructor {
         }
     }
 
-    /// Record demultiplexing, GAP (when `dealias`) and the mix, or the joint method's seed and
-    /// whole run (cube and channels Fα included) into `enc`.
-    fn encode_channels(&self, enc: &mut wgpu::CommandEncoder, dealias: bool) {
-        self.demux.encode(enc);
+    /// An encoder holding demultiplexing, GAP (when `dealias`) and the mix, or the joint
+    /// method's seed and whole run (cube and channels Fα included). A joint run whose λ is
+    /// searched submits its start and the search's trials on the way (the search needs their
+    /// residuals on the host); the encoder returned holds the run after it.
+    fn channels_encoder(&self, ctx: &GpuContext, dealias: bool) -> Result<wgpu::CommandEncoder> {
+        let new = || ctx.device.create_command_encoder(&Default::default());
+        let mut enc = new();
+        self.demux.encode(&mut enc);
         if let Some(g) = self.gap.as_ref().filter(|_| dealias) {
-            g.encode(enc);
+            g.encode(&mut enc);
         }
         if let Some(m) = &self.mix {
             m.record(&mut enc.begin_compute_pass(&Default::default()));
         }
         if let Some((seed, j)) = self.joint.as_ref().filter(|_| dealias) {
             seed.record(&mut enc.begin_compute_pass(&Default::default()));
-            j.encode(enc);
+            if !j.searches() {
+                j.encode(&mut enc);
+                return Ok(enc);
+            }
+            j.encode_search_start(&mut enc);
+            ctx.queue.submit([enc.finish()]);
+            j.search(ctx)?;
+            enc = new();
+            j.encode_after_search(&mut enc);
         }
+        Ok(enc)
     }
 
     /// The GAP run's statistics after a submission that held it.
@@ -147,8 +160,7 @@ impl GpuReconstructor {
     /// The channels of a raw frame, with or without de-aliasing, read back.
     fn channels_of(&self, ctx: &GpuContext, frame: &Cube, dealias: bool) -> Result<Cube> {
         self.upload(ctx, frame)?;
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        self.encode_channels(&mut enc, dealias);
+        let mut enc = self.channels_encoder(ctx, dealias)?;
         let src = self.channels(dealias);
         let bytes = self.channels_staging.size();
         enc.copy_buffer_to_buffer(src, 0, &self.channels_staging, 0, bytes);
@@ -199,8 +211,7 @@ impl GpuReconstructor {
     /// frame to frame): the GPU twin of `Reconstructor::run`'s cube.
     pub fn run_into(&self, ctx: &GpuContext, frame: &Cube, cube: &mut Cube) -> Result<GpuRun> {
         self.upload(ctx, frame)?;
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        self.encode_channels(&mut enc, true);
+        let mut enc = self.channels_encoder(ctx, true)?;
         self.encode_unmix(&mut enc);
         self.unmix.encode_readback(&mut enc);
         ctx.queue.submit([enc.finish()]);
@@ -213,8 +224,7 @@ impl GpuReconstructor {
     /// that stays there (display, GPU metrics); returns once the GPU is done.
     pub fn run_resident(&self, ctx: &GpuContext, frame: &Cube) -> Result<GpuRun> {
         self.upload(ctx, frame)?;
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        self.encode_channels(&mut enc, true);
+        let mut enc = self.channels_encoder(ctx, true)?;
         self.encode_unmix(&mut enc);
         ctx.queue.submit([enc.finish()]);
         self.run_stats(ctx)
@@ -226,22 +236,15 @@ impl GpuReconstructor {
     }
 }
 
-/// The GPU runs the joint method's TV prior (plain or reweighted) with a fixed λ, with or
-/// without noise weights; the plug-and-play prior and the discrepancy rule are CPU-only and
-/// refused here with the key to change.
+/// The GPU runs the joint method's TV prior (plain or reweighted; λ fixed or by the
+/// discrepancy principle; with or without noise weights); the plug-and-play prior is CPU-only
+/// and refused here with the key to change.
 fn gpu_joint_supported(j: &Joint) -> Result<()> {
-    let cfg = j.tables().config;
-    let unsupported = if cfg.prior != Prior::Tv {
-        Some("reconstruct.joint.prior = \"pnp\"")
-    } else if cfg.weight_rule != WeightRule::Fixed {
-        Some("reconstruct.joint.weight_rule = \"discrepancy\"")
-    } else {
-        None
-    };
-    match unsupported {
-        Some(what) => Err(GpuError::Unsupported(format!(
-            "{what} runs on the CPU only (the GPU runs the TV prior with a fixed λ)"
-        ))),
-        None => Ok(()),
+    match j.tables().config.prior {
+        Prior::Tv => Ok(()),
+        Prior::Pnp => Err(GpuError::Unsupported(
+            "reconstruct.joint.prior = \"pnp\" runs on the CPU only (the GPU runs the TV prior)"
+                .into(),
+        )),
     }
 }

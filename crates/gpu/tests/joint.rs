@@ -33,7 +33,7 @@ mod common;
 
 use nalgebra::DMatrix;
 use specmux_core::carriers::default_layout;
-use specmux_core::joint::{Joint, JointConfig, JointStats, SpectralPrior};
+use specmux_core::joint::{Joint, JointConfig, JointStats, SpectralPrior, WeightRule};
 use specmux_core::noise::DataWeights;
 use specmux_core::unmix::curvature;
 use specmux_core::Cube;
@@ -411,6 +411,69 @@ fn a_rebalanced_run_matches_the_core() {
             "step {got} against {want}"
         );
     }
+}
+
+/// λ by the discrepancy principle: y = aᵀα plus uniform noise of variance σ², ω = 1/σ². The
+/// GPU's search (its trials a submission each, the residual ratio read back) takes the CPU's
+/// trials — the same count, each λ and ratio within 1e-3 — reaches ρ ≈ 1, and its run from the
+/// choice ends within 1e-3 of the CPU's α (8 × 20 search steps and 30 more: rounding adds up
+/// over 190 non-expansive steps, tests/joint.rs's 30-step bound × 6).
+#[test]
+fn the_discrepancy_search_matches_the_core() {
+    let Some(ctx) = common::context() else { return };
+    let searched = JointConfig {
+        weight_rule: WeightRule::Discrepancy,
+        search_iterations: 20,
+        tv_weight: 1.0,
+        ..config(30)
+    };
+    let joint = solver_with(&searched, 1.0);
+    let (mut frame, seed) = problem(&joint);
+    let mean = frame.data.iter().map(|v| v.abs()).sum::<f32>() / frame.data.len() as f32;
+    let half_width = 0.05 * mean;
+    let noise = common::noise(W * H, 11);
+    frame
+        .data
+        .iter_mut()
+        .zip(&noise)
+        .for_each(|(v, n)| *v += half_width * n);
+    // Uniform on ±h: variance h²/3.
+    let omega = vec![3.0 / (half_width * half_width); W * H];
+    let weights = DataWeights::new(Cube::from_vec(W, H, 1, omega).unwrap());
+    let (alpha, cpu) = joint.run(&frame, &seed, Some(&weights)).unwrap();
+    let want = cpu.discrepancy.clone().unwrap();
+    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
+    g.set_weights(&ctx, &weights).unwrap();
+    assert!(g.searches());
+    submit(&ctx, |enc| g.encode_search_start(enc));
+    let got = g.search(&ctx).unwrap();
+    submit(&ctx, |enc| g.encode_after_search(enc));
+    let stats = g.stats(&ctx).unwrap();
+    eprintln!("CPU search {want:?}\nGPU search {got:?}");
+    assert!(want.trials.len() >= 2, "the search must move λ: {want:?}");
+    assert_eq!(got.trials.len(), want.trials.len());
+    for (a, b) in got.trials.iter().zip(&want.trials) {
+        for k in 0..2 {
+            assert!(((a[k] - b[k]) / b[k]).abs() < 1e-3, "{a:?} against {b:?}");
+        }
+    }
+    assert!(want.reached && got.reached, "{want:?}");
+    assert!(((got.lambda - want.lambda) / want.lambda).abs() < 1e-3);
+    assert!(((stats.lambda - cpu.lambda) / cpu.lambda).abs() < 1e-3);
+    assert!(stats.discrepancy.is_some_and(|s| s.trials == got.trials));
+    let e = rel(&g.state(&ctx).unwrap().alpha, &alpha.data);
+    let dr = (stats.residual_ratio - cpu.residual_ratio).abs() / cpu.residual_ratio;
+    eprintln!(
+        "α after the search and 30 iterations: relative L2 {e:.2e}; residual ratio GPU {:.4}, CPU {:.4}",
+        stats.residual_ratio, cpu.residual_ratio
+    );
+    assert!(e < 1e-3 && dr < 1e-3, "α {e:.2e}, ratio {dr:.2e}");
+    assert_eq!(stats.objective.len(), cpu.objective.len());
+    // Without weights the search has nothing to match.
+    let (g, _) = gpu_solver(&ctx, &joint, &frame, &seed, &[1.0; BANDS]);
+    submit(&ctx, |enc| g.encode_search_start(enc));
+    let e = g.search(&ctx).unwrap_err().to_string();
+    assert!(e.contains("noise weights"), "{e}");
 }
 
 /// A diagonal spectral prior of unequal weights (the form of the trained prior) in place of

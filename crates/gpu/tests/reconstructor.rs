@@ -101,6 +101,12 @@ fn check_within(toml: &str, channels: f64) {
             (g.noise_weights, g.saturated_pixels),
             (c.noise_weights, c.saturated_pixels)
         );
+        assert_eq!(g.discrepancy.is_some(), c.discrepancy.is_some());
+        if let (Some(gs), Some(cs)) = (&g.discrepancy, &c.discrepancy) {
+            eprintln!("λ searched: GPU {:?}, CPU {:?}", gs.trials, cs.trials);
+            assert_eq!(gs.trials.len(), cs.trials.len());
+            assert!(((gs.lambda - cs.lambda) / cs.lambda).abs() < 1e-3);
+        }
     }
     let gx = gpu_recon.demultiplex(&ctx, &sim.frame).unwrap();
     assert!(metrics::compare(&cpu.xhat, &gx).unwrap().nrmse < 2e-5);
@@ -166,25 +172,29 @@ fn joint_with_noise_weights_and_saturated_pixels() {
     check_within(toml, 1e-4);
 }
 
-/// The joint settings that run on the CPU only are refused by name, not run differently.
+/// λ by the discrepancy principle on the camera's noise weights: the search's trials on the
+/// GPU, a submission and a read-back each, as on the CPU.
 #[test]
-fn joint_settings_without_a_gpu_kernel_are_refused_naming_the_key() {
+fn joint_with_the_discrepancy_rule() {
+    check_within(
+        "[scene]\nsize = [64, 64]\n[rig.sensor]\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 20\nsearch_iterations = 10\nnoise_weights = true\nweight_rule = \"discrepancy\"\n",
+        1e-4,
+    );
+}
+
+/// The plug-and-play prior, which runs on the CPU only, is refused by name, not run
+/// differently.
+#[test]
+fn the_plug_and_play_prior_is_refused_naming_the_key() {
     let Some(ctx) = common::context() else { return };
-    for (keys, named) in [
-        ("prior = \"pnp\"\n", "reconstruct.joint.prior"),
-        (
-            "noise_weights = true\nweight_rule = \"discrepancy\"\n",
-            "reconstruct.joint.weight_rule",
-        ),
-    ] {
-        let toml = format!(
-            "[scene]\nsize = [32, 32]\n[rig.sensor]\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 2\n{keys}"
-        );
-        let (_, recon) = simulated(&toml);
-        let e = GpuReconstructor::new(&ctx, &recon)
-            .err()
-            .map(|e| e.to_string());
-        let e = e.unwrap_or_default();
-        assert!(e.contains(named) && e.contains("CPU only"), "{keys}: {e}");
-    }
+    let toml = "[scene]\nsize = [32, 32]\n[rig.sensor]\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 2\nprior = \"pnp\"\n";
+    let (_, recon) = simulated(toml);
+    let e = GpuReconstructor::new(&ctx, &recon)
+        .err()
+        .map(|e| e.to_string())
+        .unwrap_or_default();
+    assert!(
+        e.contains("reconstruct.joint.prior") && e.contains("CPU only"),
+        "{e}"
+    );
 }

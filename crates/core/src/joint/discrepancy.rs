@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 /// Accept a trial when ρ lies within a factor 1 + TOLERANCE of 1.
 const TOLERANCE: f64 = 0.1;
 /// Most trial λ of one search.
-const MAX_TRIALS: usize = 8;
+pub const MAX_TRIALS: usize = 8;
 /// The search stays within λ₀/RANGE … λ₀·RANGE.
 const RANGE: f64 = 1e4;
 /// Largest change of ln λ from one trial to the next while one side is unbracketed (×100).

@@ -49,8 +49,12 @@ const LANES: u32 = 8u;
 @group(0) @binding(9) var<storage, read_write> extremes: array<atomic<u32>, 2>;
 // The reweighting's list of mean ‖∇α‖ (a count, then the values the sums append).
 @group(0) @binding(10) var<storage, read> rw: array<f32>;
-// The means of |α| the steps are balanced by (a count, then the seed's and the rebalance's).
+// The means of |α| the steps are balanced by (a count, then the seed's, the rebalance's and
+// those of each λ set by the host).
 @group(0) @binding(11) var<storage, read> bal: array<f32>;
+// λ set by the host (a trial of the discrepancy search, or its choice); 0: the rule's
+// λ = tv_weight·mean‖a‖·mean|y|.
+@group(0) @binding(12) var<storage, read> lam: array<f32>;
 
 const SC_LAMBDA: u32 = 3u;
 const SC_TAU: u32 = 4u;
@@ -97,7 +101,7 @@ fn linear(gid: vec3<u32>, nwg: vec3<u32>) -> u32 {
 // is 0); τ = ratio·s·step, σ = step/(ratio·s); M = V diag(1/(1 + τe)) Vᵀ from η'Q = V diag(e) Vᵀ.
 @compute @workgroup_size(1)
 fn setup() {
-    let lambda = prm.lambda_per_y * sc[1];
+    let lambda = target_lambda();
     let mean_alpha = bal[bitcast<u32>(bal[0])];
     var scale = 1.0;
     if lambda > 0.0 && mean_alpha > 0.0 {
@@ -115,6 +119,32 @@ fn setup() {
             }
             sc[SC_MAT + c * J + row] = v;
         }
+    }
+}
+
+// The λ a run or a trial takes: the host's, else the rule's from mean|y|.
+fn target_lambda() -> f32 {
+    if lam[0] > 0.0 {
+        return lam[0];
+    }
+    return prm.lambda_per_y * sc[1];
+}
+
+// ---- relambda (per pixel, before `setup` sets the new λ): the TV dual rescaled into the new
+// ball, q ← q·λ_new/λ_old (0 when λ_old = 0), and the extrapolation restarted, ᾱ = α (the
+// CPU's `set_lambda`; the steps and tables follow from `setup` and `retable`).
+@compute @workgroup_size(256)
+fn relambda(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let p = linear(gid, nwg);
+    if p >= prm.npx {
+        return;
+    }
+    let old = sc[SC_LAMBDA];
+    let f = select(0.0, target_lambda() / old, old > 0.0);
+    for (var j = 0u; j < J; j++) {
+        st[at(QX + j, p)] *= f;
+        st[at(QY + j, p)] *= f;
+        st[at(BAR + j, p)] = st[at(ALPHA + j, p)];
     }
 }
 
