@@ -182,6 +182,16 @@ fn joint_with_the_discrepancy_rule() {
     );
 }
 
+/// A frame of almost no light (10⁻⁶ e⁻ at full scale: dark noise alone) with noise weights and
+/// the discrepancy rule: finite on both devices, and the same.
+#[test]
+fn joint_on_a_dark_frame_with_the_discrepancy_rule() {
+    check_within(
+        "[scene]\nsize = [48, 48]\n[rig.sensor]\nelectrons_at_full_scale = 1e-6\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 10\nsearch_iterations = 5\nnoise_weights = true\nweight_rule = \"discrepancy\"\n",
+        1e-4,
+    );
+}
+
 /// The plug-and-play prior, which runs on the CPU only, is refused by name, not run
 /// differently.
 #[test]

@@ -127,22 +127,24 @@ fn gpu_reconstruct(
     let Some(ctx) = &device.gpu else {
         return Ok(None);
     };
-    let err = |e: specmux_gpu::GpuError| Error::Numerical(e.to_string());
     let t = std::time::Instant::now();
-    let g = specmux_gpu::GpuReconstructor::new(ctx, recon).map_err(err)?;
+    let g = specmux_gpu::GpuReconstructor::new(ctx, recon)?;
     let t_setup = t.elapsed().as_secs_f64();
     let mut cube = g.output_cube();
     let t = std::time::Instant::now();
-    let run = g.run_into(ctx, frame, &mut cube).map_err(err)?;
+    let run = g.run_into(ctx, frame, &mut cube)?;
     let iterations = run
         .joint
         .as_ref()
         .map_or(run.gap.iterations, |j| j.iterations);
-    let times = format!(
+    let mut times = format!(
         "{}: setup {t_setup:.4} s, demultiplex + de-alias ({iterations} iterations) + unmix {:.4} s (first frame)",
         device.describe(),
         t.elapsed().as_secs_f64()
     );
+    if let Some(w) = run.joint.as_ref().and_then(|j| j.warning()) {
+        times += &format!("\nwarning: {w}");
+    }
     Ok(Some((cube, run.unmix, times)))
 }
 
