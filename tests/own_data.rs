@@ -72,6 +72,13 @@ fn auto_says_which_device_table_it_picked_from() {
     let json = std::fs::read_to_string(d.join("rec/reconstruct.json")).unwrap();
     let report: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(report["auto"]["measured_on"], "two CPU threads", "{json}");
+    // Its pick is the joint method: its run is reported as in demo's report.json.
+    let picked = report["auto"]["iterations"].as_u64();
+    assert_eq!(report["joint"]["iterations"].as_u64(), picked, "{json}");
+    assert!(
+        text.contains("joint: ") && text.contains("joint prior tv"),
+        "{text}"
+    );
     // With `[reconstruct] auto_table` it picks from a bench report of this machine instead.
     ok(
         &d,

@@ -103,18 +103,29 @@ fn reconstruct_on_device(
     device: &crate::bench::Device,
     recon: &Reconstructor,
     frame: &Cube,
-) -> Result<(Cube, UnmixStats, String)> {
+) -> Result<DeviceRun> {
     if let Some(done) = gpu_reconstruct(device, recon, frame)? {
         return Ok(done);
     }
     let r = recon.run(frame, None)?;
     let [t_demux, t_gap, t_unmix] = r.seconds;
-    let mut times =
-        format!("CPU: demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s");
-    if let Some(w) = r.joint.as_ref().and_then(|j| j.warning()) {
-        times += &format!("\nwarning: {w}");
-    }
-    Ok((r.cube, r.unmix, times))
+    Ok(DeviceRun {
+        cube: r.cube,
+        unmix: r.unmix,
+        joint: r.joint,
+        times: format!(
+            "CPU: demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s"
+        ),
+    })
+}
+
+/// One frame's reconstruction on a device: the cube, the unmixing's counters, the joint
+/// method's run (None for the other methods) and a line of stage times.
+struct DeviceRun {
+    cube: Cube,
+    unmix: UnmixStats,
+    joint: Option<specmux_core::joint::JointStats>,
+    times: String,
 }
 
 /// The GPU's chain (specmux-gpu), or None where the device is the CPU.
@@ -123,7 +134,7 @@ fn gpu_reconstruct(
     device: &crate::bench::Device,
     recon: &Reconstructor,
     frame: &Cube,
-) -> Result<Option<(Cube, UnmixStats, String)>> {
+) -> Result<Option<DeviceRun>> {
     let Some(ctx) = &device.gpu else {
         return Ok(None);
     };
@@ -137,15 +148,17 @@ fn gpu_reconstruct(
         .joint
         .as_ref()
         .map_or(run.gap.iterations, |j| j.iterations);
-    let mut times = format!(
+    let times = format!(
         "{}: setup {t_setup:.4} s, demultiplex + de-alias ({iterations} iterations) + unmix {:.4} s (first frame)",
         device.describe(),
         t.elapsed().as_secs_f64()
     );
-    if let Some(w) = run.joint.as_ref().and_then(|j| j.warning()) {
-        times += &format!("\nwarning: {w}");
-    }
-    Ok(Some((cube, run.unmix, times)))
+    Ok(Some(DeviceRun {
+        cube,
+        unmix: run.unmix,
+        joint: run.joint,
+        times,
+    }))
 }
 
 /// Without the `gpu` feature the device is the CPU (`Device::open` refused `gpu`).
@@ -154,7 +167,7 @@ fn gpu_reconstruct(
     _: &crate::bench::Device,
     _: &Reconstructor,
     _: &Cube,
-) -> Result<Option<(Cube, UnmixStats, String)>> {
+) -> Result<Option<DeviceRun>> {
     Ok(None)
 }
 
@@ -603,6 +616,8 @@ struct ReconstructReport {
     /// measured frames of `--calibration`.
     calibration: ReconstructCalibration,
     unmix: UnmixStats,
+    /// The joint method's run, as in report.json (null for the other methods).
+    joint: Option<specmux_core::joint::JointStats>,
     metrics: Option<specmux_core::metrics::Metrics>,
     /// What `method = "auto"` picked, from the table of the device that ran it (null for the
     /// other methods).
@@ -672,19 +687,28 @@ pub fn reconstruct(
         say!(text, "auto: {}", choice.reason);
     }
     let mean_snr = recon.frame_snr(&frame)?;
-    let warnings: Vec<String> = mean_snr
+    let mut warnings: Vec<String> = mean_snr
         .and_then(specmux_core::noise::snr_warning)
         .into_iter()
         .collect();
     for w in &warnings {
         say!(text, "warning: {w}");
     }
-    let (cube, stats, times) = reconstruct_on_device(&device, &recon, &frame)?;
+    let run = reconstruct_on_device(&device, &recon, &frame)?;
+    let (cube, stats) = (run.cube, run.unmix);
     say!(
         text,
-        "{times} ({} pixels bound by r ≥ 0)",
+        "{} ({} pixels bound by r ≥ 0)",
+        run.times,
         stats.constrained_pixels
     );
+    if let Some(j) = &run.joint {
+        text += &run::joint_summary(j);
+        if let Some(w) = j.warning() {
+            say!(text, "warning: {w}");
+            warnings.push(w);
+        }
+    }
     let files = OutputSet::begin(out)?;
     write_cube(&files, "cube", &cube, &band_names(&grid), npy)?;
     let metrics = match &truth {
@@ -715,6 +739,7 @@ pub fn reconstruct(
             carriers: cal.carriers.clone(),
         },
         unmix: stats,
+        joint: run.joint,
         metrics,
         auto: recon.auto.clone(),
         mean_snr,

@@ -499,22 +499,27 @@ impl RunReport {
             s += &format!("auto: {}\n", a.reason);
         }
         if let Some(j) = &self.joint {
-            let relaxed = j
-                .relaxation
-                .map(|g| format!(", relaxation γ = {g}"))
-                .unwrap_or_default();
-            s += &format!(
-                "joint: {} iterations{relaxed}, λ = {:.3e}, objective {:.4e} → {:.4e}, constraint violation {:.1e} of the peak (clipped)\n",
-                j.iterations,
-                j.lambda,
-                j.objective.first().copied().unwrap_or(f64::NAN),
-                j.objective.last().copied().unwrap_or(f64::NAN),
-                j.violation
-            );
-            s += &joint_noise_line(j);
+            s += &joint_summary(j);
         }
         s
     }
+}
+
+/// The joint method's run in two lines: iterations, λ, objective and violation; then its
+/// prior, weights, residual and λ rule (`demo`'s table and `reconstruct`).
+pub fn joint_summary(j: &specmux_core::joint::JointStats) -> String {
+    let relaxed = j
+        .relaxation
+        .map(|g| format!(", relaxation γ = {g}"))
+        .unwrap_or_default();
+    format!(
+        "joint: {} iterations{relaxed}, λ = {:.3e}, objective {:.4e} → {:.4e}, constraint violation {:.1e} of the peak (clipped)\n",
+        j.iterations,
+        j.lambda,
+        j.objective.first().copied().unwrap_or(f64::NAN),
+        j.objective.last().copied().unwrap_or(f64::NAN),
+        j.violation
+    ) + &joint_noise_line(j)
 }
 
 /// The joint method's prior, data weights, weighted residual and λ rule in one line.
