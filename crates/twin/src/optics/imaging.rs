@@ -371,7 +371,9 @@ impl Chain {
 
     /// [`dither`] for every pattern.
     pub fn dither(&self) -> Result<Vec<Display>> {
+        // In parallel over the patterns: error diffusion is sequential within one.
         (0..self.carriers.len())
+            .into_par_iter()
             .map(|i| self.dither_one(i))
             .collect()
     }
@@ -404,7 +406,8 @@ impl Chain {
         lens_cfg: Option<&LensConfig>,
         spectra: &[IntensitySpectrum],
     ) -> Vec<ImageSpectrum> {
-        (spectra.iter().zip(&self.lights))
+        // In parallel over the patterns: folding a spectrum onto the torus is sequential.
+        (spectra.par_iter().zip(&self.lights))
             .map(|(s, light)| lens(lens_cfg, &self.modulator, s, light))
             .collect()
     }
