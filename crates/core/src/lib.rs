@@ -9,6 +9,7 @@ pub mod calibration;
 pub mod carriers;
 pub mod crosstalk;
 pub mod cube;
+pub mod dead_leaves;
 pub mod demux;
 pub mod denoise;
 pub mod error;

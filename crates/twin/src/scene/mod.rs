@@ -3,7 +3,7 @@
 
 pub mod bars;
 pub mod config;
-pub mod dead_leaves;
+pub use specmux_core::dead_leaves;
 pub mod mitsuba;
 pub mod shaded;
 

@@ -1,7 +1,8 @@
 //! The dead-leaves model (Matheron; Lee, Mumford & Huang 2001): opaque discs with radii drawn from
 //! a density ∝ r⁻³ between r_min and r_max, dropped until the plane is covered. Its images are
 //! scale invariant with a power spectrum close to 1/f², the standard synthetic stand-in for natural
-//! images; here each leaf carries one measured reflectance spectrum.
+//! images; in the twin's scene each leaf carries one measured reflectance spectrum. The label
+//! map lives in core so that core's own tests (GAP's) draw the very scene the twin does.
 
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
