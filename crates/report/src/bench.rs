@@ -91,6 +91,20 @@ pub enum NoiseAware {
 }
 
 impl Setting {
+    /// `method` at `iterations` with the bench's defaults: crop 0.25, square window, the TV
+    /// prior, no noise model, plain TV (the other settings vary one of these by struct update).
+    pub fn new(method: Method, iterations: usize) -> Setting {
+        Setting {
+            method,
+            iterations,
+            crop: 0.25,
+            window: WindowShape::Square,
+            prior: Prior::Tv,
+            noise: NoiseAware::Off,
+            reweight_rounds: 0,
+        }
+    }
+
     /// Short label, e.g. `gap-tv 20 it, crop 0.25 square`.
     pub fn label(&self) -> String {
         let m = match self.method {
@@ -131,37 +145,20 @@ pub fn default_grid() -> Vec<Setting> {
     for crop in [0.15, 0.2, 0.25] {
         for window in shapes {
             g.push(Setting {
-                method: Method::Fourier,
-                iterations: 0,
                 crop,
                 window,
-                prior: Prior::Tv,
-                noise: NoiseAware::Off,
-                reweight_rounds: 0,
+                ..Setting::new(Method::Fourier, 0)
             });
         }
     }
     for method in [Method::Gap, Method::GapTv] {
         for iterations in [1, 2, 5, 10, 20, 50] {
-            g.push(Setting {
-                method,
-                iterations,
-                crop: 0.25,
-                window: WindowShape::Square,
-                prior: Prior::Tv,
-                noise: NoiseAware::Off,
-                reweight_rounds: 0,
-            });
+            g.push(Setting::new(method, iterations));
         }
         for window in &shapes[1..] {
             g.push(Setting {
-                method,
-                iterations: 20,
-                crop: 0.25,
                 window: *window,
-                prior: Prior::Tv,
-                noise: NoiseAware::Off,
-                reweight_rounds: 0,
+                ..Setting::new(method, 20)
             });
         }
     }
@@ -211,16 +208,12 @@ pub fn grid_for(sim: &Simulated, device: &Device) -> Vec<Setting> {
     g
 }
 
-/// The joint method at crop 0.25, square window.
+/// The joint method with `prior` and `noise` (crop 0.25, square window).
 fn joint_setting(iterations: usize, prior: Prior, noise: NoiseAware) -> Setting {
     Setting {
-        method: Method::Joint,
-        iterations,
-        crop: 0.25,
-        window: WindowShape::Square,
         prior,
         noise,
-        reweight_rounds: 0,
+        ..Setting::new(Method::Joint, iterations)
     }
 }
 
@@ -1190,23 +1183,10 @@ mod tests {
         let joint = joint_setting(30, Prior::Tv, NoiseAware::Off);
         let grid = [
             Setting {
-                method: Method::Fourier,
-                iterations: 0,
-                crop: 0.25,
                 window: WindowShape::Circular,
-                prior: Prior::Tv,
-                noise: NoiseAware::Off,
-                reweight_rounds: 0,
+                ..Setting::new(Method::Fourier, 0)
             },
-            Setting {
-                method: Method::Gap,
-                iterations: 2,
-                crop: 0.25,
-                window: WindowShape::Square,
-                prior: Prior::Tv,
-                noise: NoiseAware::Off,
-                reweight_rounds: 0,
-            },
+            Setting::new(Method::Gap, 2),
             joint,
             joint_setting(30, Prior::Pnp, NoiseAware::Off),
             Setting {
@@ -1296,20 +1276,11 @@ mod tests {
         assert_eq!(device.auto_table(), want);
         assert_eq!(Device::cpu().auto_table(), specmux_core::auto::CPU);
         let sim = tiny();
-        let setting = |method, iterations| Setting {
-            method,
-            iterations,
-            crop: 0.25,
-            window: WindowShape::Square,
-            prior: Prior::Tv,
-            noise: NoiseAware::Off,
-            reweight_rounds: 0,
-        };
         let grid = [
-            setting(Method::Fourier, 0),
-            setting(Method::Gap, 3),
-            setting(Method::GapTv, 3),
-            setting(Method::Joint, 5),
+            Setting::new(Method::Fourier, 0),
+            Setting::new(Method::Gap, 3),
+            Setting::new(Method::GapTv, 3),
+            Setting::new(Method::Joint, 5),
         ];
         let gpu = work_precision_on(&device, &sim, &grid, 1).unwrap();
         let cpu = work_precision(&sim, &grid, 1).unwrap();
