@@ -23,7 +23,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "core",
         &[
             &["error"],
-            &["cube", "spectral", "interrupt"],
+            &["cube", "spectral", "interrupt", "dead_leaves"],
             &["fft"],
             &["fft_backend"],
             &["carriers"],
