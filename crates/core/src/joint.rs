@@ -1148,14 +1148,17 @@ impl Joint {
     }
 }
 
-/// The data weights (1 without any) over their mean, and the mean; negative weights and
-/// weights that are all zero are refused.
-fn normalised_weights(omega: Option<&Cube>, n: usize) -> Result<(Vec<f32>, f64)> {
+/// The data weights (1 without any) over their mean, and the mean; negative, NaN or infinite
+/// weights and weights that are all zero are refused. The CPU's `start` and the GPU's
+/// `set_weights` both take ω through it.
+pub fn normalised_weights(omega: Option<&Cube>, n: usize) -> Result<(Vec<f32>, f64)> {
     let Some(o) = omega else {
         return Ok((vec![1.0; n], 1.0));
     };
-    if o.data.iter().any(|&v| v < 0.0) {
-        return Err(Error::Numerical("joint: a data weight is negative".into()));
+    if o.data.iter().any(|&v| !(v.is_finite() && v >= 0.0)) {
+        return Err(Error::Numerical(
+            "joint: a data weight is negative, NaN or infinite".into(),
+        ));
     }
     let mean = o.data.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
     if mean <= 0.0 {

@@ -12,7 +12,8 @@ use crate::gap;
 use crate::mix::GpuMix;
 use specmux_core::joint::discrepancy::{self, Search};
 use specmux_core::joint::{
-    rebalances_before, reweights_before, Joint, JointStats, SpectralPrior, WeightRule,
+    normalised_weights, rebalances_before, reweights_before, Joint, JointStats, SpectralPrior,
+    WeightRule,
 };
 use specmux_core::noise::DataWeights;
 use std::sync::Mutex;
@@ -267,7 +268,8 @@ impl GpuJoint {
             trial_staging: ctx.readback("joint trial residual", b.residual.size()),
             b,
         };
-        joint.write_weights(ctx, &vec![1.0; npx], &vec![false; npx], false);
+        let (ones, mean) = normalised_weights(None, npx)?;
+        joint.write_weights(ctx, (&ones, mean), &vec![false; npx], false);
         Ok(joint)
     }
 
@@ -285,40 +287,31 @@ impl GpuJoint {
                 self.npx
             )));
         }
-        if omega.data.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-            return Err(GpuError::Numerical(
-                "joint: a data weight is negative, NaN or infinite".into(),
-            ));
-        }
-        if omega.data.iter().all(|&v| v == 0.0) {
-            return Err(GpuError::Numerical(
-                "joint: every data weight is zero; there is no measurement to fit".into(),
-            ));
-        }
-        self.write_weights(ctx, &omega.data, &weights.saturated, true);
+        let scaled = normalised_weights(Some(omega), self.npx)?;
+        self.write_weights(ctx, (&scaled.0, scaled.1), &weights.saturated, true);
         Ok(())
     }
 
-    /// ω over its mean into its table, as the CPU's `Joint::start` takes it (so λ and the
-    /// spectral prior keep their balance against the data whatever the weights' units), and
-    /// the saturation flags into theirs.
-    /// `set`: the weights are the caller's (reported as such), not the uniform start.
-    fn write_weights(&self, ctx: &GpuContext, omega: &[f32], saturated: &[bool], set: bool) {
+    /// ω over its mean (`normalised_weights`, as the CPU's `Joint::start` takes it, so λ and
+    /// the spectral prior keep their balance against the data whatever the weights' units)
+    /// into its table, and the saturation flags into theirs. `set`: the weights are the
+    /// caller's (reported as such), not the uniform start.
+    fn write_weights(
+        &self,
+        ctx: &GpuContext,
+        (scaled, mean): (&[f32], f64),
+        saturated: &[bool],
+        set: bool,
+    ) {
         let plane = |k: usize| (k * self.npx * 4) as u64;
-        let mean = omega.iter().map(|&v| v as f64).sum::<f64>() / omega.len() as f64;
-        let scaled: Vec<f32> = omega.iter().map(|&v| (v as f64 / mean) as f32).collect();
         let flags: Vec<f32> = saturated.iter().map(|&s| s as u8 as f32).collect();
         let q = &ctx.queue;
-        q.write_buffer(
-            &self.b.tab,
-            plane(self.j + 3),
-            bytemuck::cast_slice(&scaled),
-        );
+        q.write_buffer(&self.b.tab, plane(self.j + 3), bytemuck::cast_slice(scaled));
         q.write_buffer(&self.b.tab, plane(self.j + 5), bytemuck::cast_slice(&flags));
         let mut info = self.weights.lock().unwrap_or_else(|e| e.into_inner());
         *info = WeightsInfo {
             scale: mean,
-            positive: omega.iter().filter(|&&v| v > 0.0).count(),
+            positive: scaled.iter().filter(|&&v| v > 0.0).count(),
             saturated: saturated.iter().filter(|&&s| s).count(),
             set,
         };
