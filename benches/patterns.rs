@@ -2,7 +2,7 @@
 //! Floyd–Steinberg and in-band-feedback dithering, coherent 4f filtering of each wheel band
 //! (streaks, exact over λ) and of a 532 nm line, lens and pixels; and the whole forward model
 //! of `scenes/full-rig.toml` at 768 × 768 (scene to sensor, every optical stage), whose stage
-//! times are printed once.
+//! times are printed once, and the same with its patterns read from a warm pattern cache.
 use criterion::{criterion_group, criterion_main, Criterion};
 use specmux_core::spectral::Library;
 use specmux_twin::experiment::Experiment;
@@ -11,6 +11,7 @@ use specmux_twin::optics::dither::DitherMethod;
 use specmux_twin::optics::fourier_filter::Light;
 use specmux_twin::optics::imaging::imaged_patterns;
 use specmux_twin::optics::imaging::OpticsConfig;
+use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
 use specmux_twin::scene::Materials;
 
@@ -49,14 +50,29 @@ fn full_rig(c: &mut Criterion) {
     let materials = Materials::load(&lib).expect("spectra/ is readable");
     let exp = Experiment::load(std::path::Path::new("scenes/full-rig.toml")).expect("full rig");
     let rig = Rig::build(&exp, &lib, &materials).expect("full rig");
-    let pipeline = Pipeline::build(&exp, &rig, &materials).expect("full-rig pipeline");
+    let pipeline = Pipeline::build(&exp, &rig, &materials)
+        .expect("full-rig pipeline")
+        .with_pattern_cache(None);
     for t in pipeline.run().expect("a forward run").1 {
         eprintln!("{t:?}");
+    }
+    let dir = std::env::temp_dir().join(format!("specmux-bench-cache-{}", std::process::id()));
+    let cache = PatternCache::open(&dir).expect("a pattern cache in the temporary folder");
+    let cached = Pipeline::build(&exp, &rig, &materials)
+        .expect("full-rig pipeline")
+        .with_pattern_cache(Some(cache));
+    cached.run().expect("a forward run that fills the cache");
+    for t in cached.run().expect("a forward run from the cache").1 {
+        eprintln!("cached: {t:?}");
     }
     let mut g = c.benchmark_group("forward");
     g.sample_size(10);
     g.bench_function("full_rig_768", |b| b.iter(|| pipeline.run().unwrap()));
+    g.bench_function("full_rig_768_cached_patterns", |b| {
+        b.iter(|| cached.run().unwrap())
+    });
     g.finish();
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 criterion_group!(benches, patterns, full_rig);

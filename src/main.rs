@@ -37,6 +37,10 @@ fn install_interrupt_handler() {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(dir) = &cli.pattern_cache {
+        // Before any thread starts; the forward pipeline reads it (twin's pattern_cache).
+        std::env::set_var(specmux_twin::pattern_cache::ENV, dir);
+    }
     install_interrupt_handler();
     let lib = cli
         .spectra

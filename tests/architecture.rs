@@ -49,16 +49,17 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     ),
     (
         "twin",
-        // The compute device the GPU stages share, the light path, then the calibration captures
-        // made with it and the bench report auto may read; experiment composes the section
-        // configs of all of these; rig, forward and run consume it.
+        // The compute device the GPU stages share, the light path, the multiplex and the cache of
+        // the optics' patterns, then the calibration captures made with it and the bench report
+        // auto may read; experiment composes the section configs of all of these; rig, forward
+        // and run consume it.
         &[
             &["device"],
             &["scene"],
             &["optics"],
             &["timing"],
             &["sensor"],
-            &["multiplex"],
+            &["multiplex", "pattern_cache"],
             &["captures"],
             &["auto_table"],
             &["experiment"],

@@ -11,6 +11,7 @@ use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_summer_for;
+use crate::pattern_cache::PatternCache;
 use crate::rig::Rig;
 use crate::scene;
 use crate::scene::Materials;
@@ -108,8 +109,9 @@ enum PatternSteps {
 }
 
 /// The optical chain's stages: what the modulator shows, the relay, the lens (optional), the
-/// sensor pixels.
+/// sensor pixels; with a pattern cache, its lookup first.
 struct OpticalSteps {
+    cache: Option<PatternCacheStage>,
     modulator: ModulatorStage,
     relay: RelayStage,
     lens: Option<LensStage>,
@@ -143,7 +145,8 @@ impl Pipeline {
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
             let chain = rig.chain(exp)?.with_pair_summer(pair_summer_for(&device));
-            PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
+            let cache = PatternCache::from_env()?;
+            PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain), cache))
         } else {
             PatternSteps::Ideal(IdealPatternStage {
                 carriers: rig.imaged_carriers.clone(),
@@ -177,12 +180,25 @@ impl Pipeline {
         })
     }
 
+    /// The pipeline with its imaged patterns kept in `cache` (None: none), in place of the one
+    /// `$SPECMUX_PATTERN_CACHE` names; ideal patterns are not cached (they cost milliseconds).
+    pub fn with_pattern_cache(mut self, cache: Option<PatternCache>) -> Pipeline {
+        if let PatternSteps::Imaged(o) = &mut self.patterns {
+            let chain = o.sampling.chain.clone();
+            o.cache = cache.map(|cache| PatternCacheStage { cache, chain });
+        }
+        self
+    }
+
     /// The stages that will run, in order.
     pub fn stages(&self) -> Vec<&dyn Stage> {
         let mut out: Vec<&dyn Stage> = vec![&self.scene, &self.wheel];
         match &self.patterns {
             PatternSteps::Ideal(s) => out.push(s),
             PatternSteps::Imaged(o) => {
+                if let Some(c) = &o.cache {
+                    out.push(c);
+                }
                 out.push(&o.modulator);
                 out.push(&o.relay);
                 if let Some(l) = &o.lens {
@@ -257,18 +273,74 @@ impl PatternSteps {
     fn run(&self, times: &mut Vec<StageTime>) -> Result<Cube> {
         match self {
             PatternSteps::Ideal(s) => timed(times, s, &()),
-            PatternSteps::Imaged(o) => {
-                let displays = timed(times, &o.modulator, &())?;
-                let spectra = timed(times, &o.relay, &displays)?;
-                match &o.lens {
-                    Some(l) => {
-                        let images = timed(times, l, &spectra)?;
-                        timed(times, &o.sampling, &images)
-                    }
-                    None => timed(times, &o.sampling, &spectra),
-                }
-            }
+            PatternSteps::Imaged(o) => match &o.cache {
+                Some(c) => c.run(times, |times| o.run(times)),
+                None => o.run(times),
+            },
         }
+    }
+}
+
+impl OpticalSteps {
+    /// s̃_k through every optical stage.
+    fn run(&self, times: &mut Vec<StageTime>) -> Result<Cube> {
+        let displays = timed(times, &self.modulator, &())?;
+        let spectra = timed(times, &self.relay, &displays)?;
+        match &self.lens {
+            Some(l) => {
+                let images = timed(times, l, &spectra)?;
+                timed(times, &self.sampling, &images)
+            }
+            None => timed(times, &self.sampling, &spectra),
+        }
+    }
+}
+
+/// The pattern cache's lookup: s̃_k read from its file when the chain's key is there, else made
+/// by the optical stages and kept (pattern_cache.rs).
+struct PatternCacheStage {
+    cache: PatternCache,
+    chain: Arc<Chain>,
+}
+
+impl Stage for PatternCacheStage {
+    fn name(&self) -> &'static str {
+        "pattern-cache"
+    }
+    fn describe(&self) -> String {
+        format!(
+            "s̃_k read from {} if an earlier run of this chain left it there (the optical stages below then do not run), else kept there after them",
+            self.cache.path(&self.chain).display()
+        )
+    }
+}
+
+impl PatternCacheStage {
+    /// The cached patterns, or those `image` makes, then kept; the lookup and the write are
+    /// timed as this stage.
+    fn run(
+        &self,
+        times: &mut Vec<StageTime>,
+        image: impl FnOnce(&mut Vec<StageTime>) -> Result<Cube>,
+    ) -> Result<Cube> {
+        let t = Instant::now();
+        let cached = self.cache.load(&self.chain)?;
+        let mut seconds = t.elapsed().as_secs_f64();
+        let patterns = match cached {
+            Some(p) => p,
+            None => {
+                let p = image(times)?;
+                let t = Instant::now();
+                self.cache.store(&self.chain, &p)?;
+                seconds += t.elapsed().as_secs_f64();
+                p
+            }
+        };
+        times.push(StageTime {
+            stage: self.name().to_string(),
+            seconds,
+        });
+        Ok(patterns)
     }
 }
 
@@ -371,10 +443,15 @@ impl Step<(), Cube> for IdealPatternStage {
 }
 
 impl OpticalSteps {
-    /// One stage per physical step of `chain`'s optics; the lens only with `[rig.lens]`.
-    fn new(chain: Arc<Chain>) -> OpticalSteps {
+    /// One stage per physical step of `chain`'s optics; the lens only with `[rig.lens]`; the
+    /// pattern cache's lookup first with a `cache`.
+    fn new(chain: Arc<Chain>, cache: Option<PatternCache>) -> OpticalSteps {
         let cfg = chain.config();
         OpticalSteps {
+            cache: cache.map(|cache| PatternCacheStage {
+                cache,
+                chain: chain.clone(),
+            }),
             modulator: ModulatorStage {
                 chain: chain.clone(),
             },

@@ -11,6 +11,7 @@ pub mod experiment;
 pub mod forward;
 pub mod multiplex;
 pub mod optics;
+pub mod pattern_cache;
 pub mod rig;
 pub mod run;
 pub mod scene;

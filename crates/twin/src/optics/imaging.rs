@@ -40,6 +40,10 @@ use std::sync::Arc;
 pub const MIN_PINHOLE_BINS: f64 = 4.0;
 /// Largest fine simulation grid side (8192² f32 pixels ≈ 270 MB per buffer).
 pub const MAX_GRID: usize = 8192;
+/// The version of the patterns' physics: part of every pattern-cache key, so a change that is
+/// meant to change the imaged patterns (and the checksums of `tests/imaged_reference.rs`,
+/// which record it) makes every cached pattern set a miss.
+pub const MODEL: u32 = 1;
 
 /// The optical stages between the carriers and the sensor; an absent one is not simulated.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -312,6 +316,23 @@ impl Chain {
     /// The sensor's size in pixels.
     pub fn sensor_size(&self) -> (usize, usize) {
         (self.width, self.height)
+    }
+
+    /// Everything the imaged patterns depend on, as text: the crate's version, [`MODEL`], the
+    /// optics, the modulator, carriers and lights (f64 in Rust's round-trip form), the sensor's
+    /// size and where the pair sums run. Equal keys give bit-identical patterns.
+    pub fn cache_key(&self) -> String {
+        format!(
+            "specmux {} imaging model {MODEL}\n{:?}\n{:?}\n{:?}\n{:?}\nsensor {}x{}, pair sums on the {}",
+            env!("CARGO_PKG_VERSION"),
+            self.cfg,
+            self.modulator,
+            self.carriers,
+            self.lights,
+            self.width,
+            self.height,
+            self.pair_device()
+        )
     }
 
     /// Pattern `i` through every step.

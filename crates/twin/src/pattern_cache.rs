@@ -1,0 +1,201 @@
+//! The imaged patterns s̃_k kept between runs, one file per optical chain (`--pattern-cache DIR`
+//! or `$SPECMUX_PATTERN_CACHE`): they depend on the rig alone, not on the scene, and the full
+//! rig takes seconds to image them, so a second experiment on the same rig reads them instead.
+//! A file holds its chain's whole key and is used only on an exact match; it is written
+//! atomically, so a reader never sees half of one.
+
+use crate::optics::imaging::Chain;
+use specmux_core::error::{Error, Result};
+use specmux_core::Cube;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// The environment variable naming the cache's folder; unset or empty: no cache.
+pub const ENV: &str = "SPECMUX_PATTERN_CACHE";
+/// The first line of every cache file.
+const MAGIC: &[u8] = b"specmux pattern cache 1\n";
+
+/// A folder of cached pattern sets.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PatternCache {
+    dir: PathBuf,
+}
+
+impl PatternCache {
+    /// The cache in `dir`, created if absent; a folder that cannot be made is refused naming it.
+    pub fn open(dir: impl Into<PathBuf>) -> Result<PatternCache> {
+        let dir = dir.into();
+        std::fs::create_dir_all(&dir).map_err(|e| {
+            Error::config(
+                "pattern cache",
+                ENV,
+                dir.display(),
+                &format!("the folder cannot be created ({e})"),
+            )
+        })?;
+        Ok(PatternCache { dir })
+    }
+
+    /// The cache `$SPECMUX_PATTERN_CACHE` names, or None when it is unset or empty.
+    pub fn from_env() -> Result<Option<PatternCache>> {
+        match std::env::var_os(ENV) {
+            Some(d) if !d.is_empty() => PatternCache::open(PathBuf::from(d)).map(Some),
+            _ => Ok(None),
+        }
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The file of `chain`'s patterns: its key's 64-bit FNV-1a hash in hex.
+    pub fn path(&self, chain: &Chain) -> PathBuf {
+        self.dir.join(format!(
+            "{:016x}.patterns",
+            fnv1a(chain.cache_key().as_bytes())
+        ))
+    }
+
+    /// `chain`'s patterns if a file with its exact key is there; None if there is none or the
+    /// file holds another chain (a hash collision). A damaged file is refused naming it.
+    pub fn load(&self, chain: &Chain) -> Result<Option<Cube>> {
+        let path = self.path(chain);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(Error::io(path, e)),
+        };
+        decode(&bytes, &chain.cache_key()).map_err(|why| damaged(&path, &why))
+    }
+
+    /// Keep `patterns` as `chain`'s (atomically: written beside the file, then renamed).
+    pub fn store(&self, chain: &Chain, patterns: &Cube) -> Result<()> {
+        let bytes = encode(&chain.cache_key(), patterns);
+        specmux_io::atomic::write_bytes(&self.path(chain), &bytes)
+    }
+}
+
+/// The one-line refusal of a damaged cache file.
+fn damaged(path: &Path, why: &str) -> Error {
+    Error::io(
+        path,
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("damaged pattern-cache file ({why}); delete it and run again"),
+        ),
+    )
+}
+
+/// 64-bit FNV-1a: a stable hash for the file name (std's hasher may change between releases).
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// MAGIC, the key's length and bytes, width, height, planes (u64 LE), the values (f32 LE).
+fn encode(key: &str, c: &Cube) -> Vec<u8> {
+    let mut out = Vec::with_capacity(MAGIC.len() + key.len() + 32 + 4 * c.data.len());
+    out.extend_from_slice(MAGIC);
+    for n in [key.len(), c.width, c.height, c.planes] {
+        out.extend_from_slice(&(n as u64).to_le_bytes());
+    }
+    out.extend_from_slice(key.as_bytes());
+    for v in &c.data {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
+/// The cube of a file written by [`encode`] with `key`; Ok(None) for another key, Err(why) for
+/// a file [`encode`] did not write whole.
+fn decode(bytes: &[u8], key: &str) -> std::result::Result<Option<Cube>, String> {
+    let mut r = bytes;
+    let mut magic = vec![0u8; MAGIC.len()];
+    r.read_exact(&mut magic)
+        .map_err(|_| "too short".to_string())?;
+    if magic != MAGIC {
+        return Err("not a specmux pattern cache of this version".into());
+    }
+    let mut sizes = [0usize; 4];
+    for s in &mut sizes {
+        let mut b = [0u8; 8];
+        r.read_exact(&mut b)
+            .map_err(|_| "header cut short".to_string())?;
+        *s = usize::try_from(u64::from_le_bytes(b)).map_err(|_| "size out of range".to_string())?;
+    }
+    let [key_len, w, h, planes] = sizes;
+    let values = w.checked_mul(h).and_then(|n| n.checked_mul(planes));
+    let expected = values
+        .and_then(|n| n.checked_mul(4))
+        .and_then(|n| n.checked_add(key_len));
+    if expected != Some(r.len()) {
+        return Err(format!(
+            "{} bytes after the header, not key + {w}×{h}×{planes} f32",
+            r.len()
+        ));
+    }
+    if &r[..key_len] != key.as_bytes() {
+        return Ok(None);
+    }
+    let data: Vec<f32> = r[key_len..]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .collect();
+    if let Some(v) = data.iter().find(|v| !v.is_finite()) {
+        return Err(format!("a pattern value is {v}"));
+    }
+    Cube::from_vec(w, h, planes, data)
+        .map(Some)
+        .map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cube() -> Cube {
+        let data = (0..4 * 3 * 2).map(|k| 0.25 * k as f32 - 1.0).collect();
+        Cube::from_vec(4, 3, 2, data).unwrap()
+    }
+
+    #[test]
+    fn a_file_gives_back_its_cube_bit_for_bit_under_its_own_key_only() {
+        let c = cube();
+        let bytes = encode("chain A", &c);
+        let back = decode(&bytes, "chain A").unwrap().unwrap();
+        assert_eq!((back.width, back.height, back.planes), (4, 3, 2));
+        assert_eq!(back.data, c.data);
+        assert!(decode(&bytes, "chain B").unwrap().is_none());
+        assert!(decode(&bytes, "chain A ").unwrap().is_none());
+    }
+
+    #[test]
+    fn a_cut_short_or_foreign_or_non_finite_file_is_damaged_not_a_miss() {
+        let c = cube();
+        let bytes = encode("k", &c);
+        for cut in [0, 10, MAGIC.len() + 5, bytes.len() - 1] {
+            let why = decode(&bytes[..cut], "k").unwrap_err();
+            assert!(!why.is_empty(), "cut at {cut}");
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(decode(&longer, "k")
+            .unwrap_err()
+            .contains("bytes after the header"));
+        let mut foreign = bytes.clone();
+        foreign[0] = b'S';
+        assert!(decode(&foreign, "k").unwrap_err().contains("not a specmux"));
+        let mut nan = bytes;
+        let at = nan.len() - 4;
+        nan[at..].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(decode(&nan, "k").unwrap_err().contains("NaN"));
+    }
+
+    #[test]
+    fn fnv1a_matches_its_published_test_vectors() {
+        // FNV-1a 64 of "" and "a" (Fowler, Noll & Vo's reference values).
+        assert_eq!(fnv1a(b""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(fnv1a(b"a"), 0xaf63_dc4c_8601_ec8c);
+    }
+}

@@ -1,0 +1,140 @@
+//! The pattern cache through the forward pipeline: a second run of the same optical chain reads
+//! the patterns bit for bit and runs none of the optical stages; any change of the chain is a
+//! miss; a damaged file is refused naming it.
+
+use specmux_core::spectral::Library;
+use specmux_twin::experiment::Experiment;
+use specmux_twin::forward::{Pipeline, Simulated, StageTime};
+use specmux_twin::pattern_cache::PatternCache;
+use specmux_twin::rig::Rig;
+use specmux_twin::scene::Materials;
+use std::path::PathBuf;
+
+const RIG: &str = "[rig.dmd]\nwidth = 48\nheight = 40\n[rig.fourier_filter]\n[rig.lens]\n";
+
+/// A fresh folder under the system's temporary one, removed when dropped.
+struct Folder(PathBuf);
+
+impl Folder {
+    fn new(name: &str) -> Folder {
+        let dir = std::env::temp_dir().join(format!("specmux-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        Folder(dir)
+    }
+}
+
+impl Drop for Folder {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// The 48 × 40 dead-leaves scene through `rig`, its patterns kept in `cache`.
+fn pipeline(rig: &str, seed: u64, cache: &Folder) -> Pipeline {
+    let toml = format!("[scene]\nsize = [48, 40]\nseed = {seed}\n{rig}");
+    let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
+    let lib = Library::default_root();
+    let materials = Materials::load(&lib).unwrap();
+    let rig = Rig::build(&exp, &lib, &materials).unwrap();
+    let cache = PatternCache::open(&cache.0).unwrap();
+    Pipeline::build(&exp, &rig, &materials)
+        .unwrap()
+        .with_pattern_cache(Some(cache))
+}
+
+fn run(p: &Pipeline) -> (Simulated, Vec<String>) {
+    let (sim, times) = p.run().unwrap();
+    let names = times.into_iter().map(|t: StageTime| t.stage).collect();
+    (sim, names)
+}
+
+fn files(dir: &Folder) -> Vec<PathBuf> {
+    let mut f: Vec<PathBuf> = std::fs::read_dir(&dir.0)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    f.sort();
+    f
+}
+
+#[test]
+fn a_second_run_of_the_chain_reads_its_patterns_and_runs_no_optical_stage() {
+    let dir = Folder::new("pattern-cache-hit");
+    let first = pipeline(RIG, 1, &dir);
+    assert!(
+        first.explain().contains("pattern-cache"),
+        "{}",
+        first.explain()
+    );
+    let (a, stages) = run(&first);
+    assert!(
+        stages.contains(&"relay-fourier-filter".to_string()),
+        "{stages:?}"
+    );
+    assert!(stages.contains(&"pattern-cache".to_string()), "{stages:?}");
+    assert_eq!(files(&dir).len(), 1);
+    // Another scene on the same rig: the chain is the same, so are the patterns.
+    let (b, stages) = run(&pipeline(RIG, 2, &dir));
+    for optical in [
+        "dmd-dither",
+        "relay-fourier-filter",
+        "lens",
+        "pixel-sampling",
+    ] {
+        assert!(!stages.contains(&optical.to_string()), "{stages:?}");
+    }
+    assert!(stages.contains(&"pattern-cache".to_string()), "{stages:?}");
+    assert_eq!(a.patterns.data, b.patterns.data);
+    assert_ne!(a.frame.data, b.frame.data, "the scenes differ");
+    // The same scene again gives the first run's frame bit for bit.
+    let (c, _) = run(&pipeline(RIG, 1, &dir));
+    assert_eq!(a.frame.data, c.frame.data);
+}
+
+#[test]
+fn a_changed_chain_misses_and_keeps_a_file_of_its_own() {
+    let dir = Folder::new("pattern-cache-miss");
+    let (a, _) = run(&pipeline(RIG, 1, &dir));
+    let wider = RIG.replace(
+        "[rig.fourier_filter]\n",
+        "[rig.fourier_filter]\npinhole_radius_um = 30\n",
+    );
+    let (b, stages) = run(&pipeline(&wider, 1, &dir));
+    assert!(
+        stages.contains(&"relay-fourier-filter".to_string()),
+        "{stages:?}"
+    );
+    assert_ne!(a.patterns.data, b.patterns.data);
+    assert_eq!(files(&dir).len(), 2);
+}
+
+#[test]
+fn a_damaged_file_is_refused_naming_it() {
+    let dir = Folder::new("pattern-cache-damaged");
+    let p = pipeline(RIG, 1, &dir);
+    run(&p);
+    let file = files(&dir).remove(0);
+    let bytes = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &bytes[..bytes.len() - 7]).unwrap();
+    let e = p
+        .run()
+        .err()
+        .expect("a damaged file is refused")
+        .to_string();
+    assert!(e.contains(&file.display().to_string()), "{e}");
+    assert!(e.contains("damaged pattern-cache file"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+}
+
+#[test]
+fn a_folder_that_cannot_be_made_is_refused_naming_the_variable_and_the_path() {
+    let dir = Folder::new("pattern-cache-file");
+    std::fs::create_dir_all(&dir.0).unwrap();
+    let blocker = dir.0.join("a-file");
+    std::fs::write(&blocker, b"x").unwrap();
+    let e = PatternCache::open(blocker.join("sub"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("SPECMUX_PATTERN_CACHE"), "{e}");
+    assert!(e.contains("a-file/sub"), "{e}");
+}
