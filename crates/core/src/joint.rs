@@ -139,7 +139,7 @@ impl Default for JointConfig {
             pnp_passes: 4,
             pnp_nonnegative: true,
             reweight_rounds: 0,
-            reweight_eps: 0.5,
+            reweight_eps: 0.03,
             trace_objective: false,
         }
     }
