@@ -308,10 +308,17 @@ impl Stage for PatternCacheStage {
         "pattern-cache"
     }
     fn describe(&self) -> String {
-        format!(
-            "s̃_k read from {} if an earlier run of this chain left it there (the optical stages below then do not run), else kept there after them",
-            self.cache.path(&self.chain).display()
-        )
+        let path = self.cache.path(&self.chain);
+        match path.exists() {
+            true => format!(
+                "s̃_k read from {} (an earlier run of this chain left it there; the optical stages below do not run unless it holds another chain)",
+                path.display()
+            ),
+            false => format!(
+                "no {} yet: the optical stages below run and s̃_k is kept there",
+                path.display()
+            ),
+        }
     }
 }
 

@@ -22,17 +22,22 @@ pub struct PatternCache {
 }
 
 impl PatternCache {
-    /// The cache in `dir`, created if absent; a folder that cannot be made is refused naming it.
+    /// The cache in `dir`, created if absent; a folder that cannot be made or written is refused
+    /// naming it, before any stage runs rather than after the seconds of imaging.
     pub fn open(dir: impl Into<PathBuf>) -> Result<PatternCache> {
         let dir = dir.into();
-        std::fs::create_dir_all(&dir).map_err(|e| {
+        let refuse = |what: &str, e: std::io::Error| {
             Error::config(
                 "pattern cache",
                 ENV,
                 dir.display(),
-                &format!("the folder cannot be created ({e})"),
+                &format!("{what} ({e})"),
             )
-        })?;
+        };
+        std::fs::create_dir_all(&dir).map_err(|e| refuse("the folder cannot be created", e))?;
+        let probe = dir.join(format!(".probe{}", std::process::id()));
+        std::fs::write(&probe, b"").map_err(|e| refuse("the folder cannot be written", e))?;
+        let _ = std::fs::remove_file(&probe);
         Ok(PatternCache { dir })
     }
 

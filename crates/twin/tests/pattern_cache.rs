@@ -66,7 +66,14 @@ fn a_second_run_of_the_chain_reads_its_patterns_and_runs_no_optical_stage() {
         "{}",
         first.explain()
     );
+    let explain = first.explain();
+    assert!(
+        explain.contains("yet: the optical stages below run"),
+        "{explain}"
+    );
     let (a, stages) = run(&first);
+    let explain = first.explain();
+    assert!(explain.contains("s̃_k read from"), "{explain}");
     assert!(
         stages.contains(&"relay-fourier-filter".to_string()),
         "{stages:?}"
@@ -137,4 +144,17 @@ fn a_folder_that_cannot_be_made_is_refused_naming_the_variable_and_the_path() {
         .to_string();
     assert!(e.contains("SPECMUX_PATTERN_CACHE"), "{e}");
     assert!(e.contains("a-file/sub"), "{e}");
+    assert!(e.contains("cannot be created"), "{e}");
+}
+
+/// /proc/self is a folder no user may add files to (not even root, whom mode bits do not stop).
+#[cfg(target_os = "linux")]
+#[test]
+fn a_folder_that_cannot_be_written_is_refused_before_any_stage_runs() {
+    let e = PatternCache::open("/proc/self").unwrap_err().to_string();
+    assert!(e.contains("SPECMUX_PATTERN_CACHE"), "{e}");
+    assert!(
+        e.contains("/proc/self") && e.contains("cannot be written"),
+        "{e}"
+    );
 }
