@@ -145,8 +145,9 @@ impl Pipeline {
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
             let chain = rig.chain(exp)?.with_pair_summer(pair_summer_for(&device));
-            let cache = PatternCache::from_env()?;
-            PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain), cache))
+            let mut steps = OpticalSteps::new(Arc::new(chain));
+            steps.keep_in(PatternCache::from_env()?);
+            PatternSteps::Imaged(steps)
         } else {
             PatternSteps::Ideal(IdealPatternStage {
                 carriers: rig.imaged_carriers.clone(),
@@ -184,8 +185,7 @@ impl Pipeline {
     /// `$SPECMUX_PATTERN_CACHE` names; ideal patterns are not cached (they cost milliseconds).
     pub fn with_pattern_cache(mut self, cache: Option<PatternCache>) -> Pipeline {
         if let PatternSteps::Imaged(o) = &mut self.patterns {
-            let chain = o.sampling.chain.clone();
-            o.cache = cache.map(|cache| PatternCacheStage { cache, chain });
+            o.keep_in(cache);
         }
         self
     }
@@ -282,6 +282,14 @@ impl PatternSteps {
 }
 
 impl OpticalSteps {
+    /// Keep the patterns in `cache` (None: no cache), looked up under the chain's key.
+    fn keep_in(&mut self, cache: Option<PatternCache>) {
+        self.cache = cache.map(|cache| PatternCacheStage {
+            cache,
+            key: self.sampling.chain.cache_key(),
+        });
+    }
+
     /// s̃_k through every optical stage.
     fn run(&self, times: &mut Vec<StageTime>) -> Result<Cube> {
         let displays = timed(times, &self.modulator, &())?;
@@ -300,7 +308,8 @@ impl OpticalSteps {
 /// by the optical stages and kept (pattern_cache.rs).
 struct PatternCacheStage {
     cache: PatternCache,
-    chain: Arc<Chain>,
+    /// The chain's `cache_key`, made once.
+    key: String,
 }
 
 impl Stage for PatternCacheStage {
@@ -308,7 +317,7 @@ impl Stage for PatternCacheStage {
         "pattern-cache"
     }
     fn describe(&self) -> String {
-        let path = self.cache.path(&self.chain);
+        let path = self.cache.path(&self.key);
         match path.exists() {
             true => format!(
                 "s̃_k read from {} (an earlier run of this chain left it there; the optical stages below do not run unless it holds another chain)",
@@ -331,14 +340,14 @@ impl PatternCacheStage {
         image: impl FnOnce(&mut Vec<StageTime>) -> Result<Cube>,
     ) -> Result<Cube> {
         let t = Instant::now();
-        let cached = self.cache.load(&self.chain)?;
+        let cached = self.cache.load(&self.key)?;
         let mut seconds = t.elapsed().as_secs_f64();
         let patterns = match cached {
             Some(p) => p,
             None => {
                 let p = image(times)?;
                 let t = Instant::now();
-                self.cache.store(&self.chain, &p)?;
+                self.cache.store(&self.key, &p)?;
                 seconds += t.elapsed().as_secs_f64();
                 p
             }
@@ -450,15 +459,12 @@ impl Step<(), Cube> for IdealPatternStage {
 }
 
 impl OpticalSteps {
-    /// One stage per physical step of `chain`'s optics; the lens only with `[rig.lens]`; the
-    /// pattern cache's lookup first with a `cache`.
-    fn new(chain: Arc<Chain>, cache: Option<PatternCache>) -> OpticalSteps {
+    /// One stage per physical step of `chain`'s optics; the lens only with `[rig.lens]`; no
+    /// pattern cache yet (`OpticalSteps::keep_in` adds one).
+    fn new(chain: Arc<Chain>) -> OpticalSteps {
         let cfg = chain.config();
         OpticalSteps {
-            cache: cache.map(|cache| PatternCacheStage {
-                cache,
-                chain: chain.clone(),
-            }),
+            cache: None,
             modulator: ModulatorStage {
                 chain: chain.clone(),
             },

@@ -4,7 +4,6 @@
 //! A file holds its chain's whole key and is used only on an exact match; it is written
 //! atomically, so a reader never sees half of one.
 
-use crate::optics::imaging::Chain;
 use specmux_core::error::{Error, Result};
 use specmux_core::Cube;
 use std::io::Read;
@@ -49,34 +48,28 @@ impl PatternCache {
         }
     }
 
-    pub fn dir(&self) -> &Path {
-        &self.dir
+    /// The file of the chain whose key (`Chain::cache_key`) is `key`: its 64-bit FNV-1a hash in
+    /// hex.
+    pub fn path(&self, key: &str) -> PathBuf {
+        self.dir
+            .join(format!("{:016x}.patterns", fnv1a(key.as_bytes())))
     }
 
-    /// The file of `chain`'s patterns: its key's 64-bit FNV-1a hash in hex.
-    pub fn path(&self, chain: &Chain) -> PathBuf {
-        self.dir.join(format!(
-            "{:016x}.patterns",
-            fnv1a(chain.cache_key().as_bytes())
-        ))
-    }
-
-    /// `chain`'s patterns if a file with its exact key is there; None if there is none or the
-    /// file holds another chain (a hash collision). A damaged file is refused naming it.
-    pub fn load(&self, chain: &Chain) -> Result<Option<Cube>> {
-        let path = self.path(chain);
+    /// The patterns kept under exactly `key`; None if there are none or the file holds another
+    /// chain (a hash collision). A damaged file is refused naming it.
+    pub fn load(&self, key: &str) -> Result<Option<Cube>> {
+        let path = self.path(key);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(Error::io(path, e)),
         };
-        decode(&bytes, &chain.cache_key()).map_err(|why| damaged(&path, &why))
+        decode(&bytes, key).map_err(|why| damaged(&path, &why))
     }
 
-    /// Keep `patterns` as `chain`'s (atomically: written beside the file, then renamed).
-    pub fn store(&self, chain: &Chain, patterns: &Cube) -> Result<()> {
-        let bytes = encode(&chain.cache_key(), patterns);
-        specmux_io::atomic::write_bytes(&self.path(chain), &bytes)
+    /// Keep `patterns` under `key` (atomically: written beside the file, then renamed).
+    pub fn store(&self, key: &str, patterns: &Cube) -> Result<()> {
+        specmux_io::atomic::write_bytes(&self.path(key), &encode(key, patterns))
     }
 }
 
