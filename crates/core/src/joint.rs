@@ -19,7 +19,10 @@ use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 pub mod discrepancy;
+mod lane;
 mod pnp;
+
+use lane::{Lane, Lanes, Portable, LANES};
 
 /// τσ‖K‖² of the step sizes: below the bound 1 of Chambolle–Pock's convergence theorem.
 const STEP_PRODUCT: f64 = 0.98;
@@ -116,6 +119,13 @@ pub struct JointConfig {
     pub reweight_rounds: usize,
     /// ε of the reweighting as a multiple of the mean ‖∇α(p)‖ over the pixels.
     pub reweight_eps: f64,
+    /// Set to zero each value of the constraint's dual r whose size falls under
+    /// `dual_flush`·λ·0.98ⁿ in iteration n (0: never). Over-relaxed, the dual of a band that
+    /// left its constraint decays as (1 − γ)ⁿ instead of reaching zero, so the constraint is
+    /// worked on at 80 % of the pixels instead of the few where it holds; the threshold's decay
+    /// keeps the perturbation summable, so the run converges to the same minimiser
+    /// (docs/joint.md, "The constraint's dual flushed").
+    pub dual_flush: f64,
     /// Record the objective before every iteration (`JointStats::objective`); off, only at the
     /// seed and the end: evaluating it costs a quarter of a TV iteration (docs/joint.md).
     pub trace_objective: bool,
@@ -140,6 +150,7 @@ impl Default for JointConfig {
             pnp_nonnegative: true,
             reweight_rounds: 0,
             reweight_eps: 0.03,
+            dual_flush: 1e-2,
             trace_objective: false,
         }
     }
@@ -157,13 +168,18 @@ impl JointConfig {
         ] {
             check_count(file, &key(field), v, 0..=100_000, unit)?;
         }
-        if !(self.tv_weight.is_finite() && self.tv_weight >= 0.0) {
-            return Err(Error::config(
-                file,
-                &key("tv_weight"),
-                self.tv_weight,
-                "must be finite and ≥ 0",
-            ));
+        for (field, v) in [
+            ("tv_weight", self.tv_weight),
+            ("dual_flush", self.dual_flush),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::config(
+                    file,
+                    &key(field),
+                    v,
+                    "must be finite and ≥ 0",
+                ));
+            }
         }
         if !(self.relaxation > 0.0 && self.relaxation < 2.0) {
             return Err(Error::config(
@@ -261,6 +277,10 @@ pub struct JointStats {
     /// before it existed, which ran γ = 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relaxation: Option<f64>,
+    /// `dual_flush` of the run (absent for plug-and-play, on the GPU, which runs the exact
+    /// iteration, and in reports made before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dual_flush: Option<f64>,
     /// Largest −(Bα)_k over the pixels and bands, relative to the largest (Bα)_k: the
     /// constraint's violation left by the last iterate (zero at the limit; clipped in the cube).
     pub violation: f64,
@@ -325,6 +345,9 @@ pub struct Joint {
     /// βB by columns, each padded with zeros to `nbp` (a multiple of 8) bands, so the
     /// per-pixel products run over whole vector lanes.
     bcol: Vec<f32>,
+    /// βB by rows, one lane each (J coefficients, zero-padded), `nbp` rows: Bᵀr as a sum of
+    /// rows.
+    brow: Vec<Lane>,
     nbp: usize,
     /// The spectral prior P in the joint's units (P·mean‖a‖²/‖F‖²_F), J × J.
     eq: DMatrix<f64>,
@@ -334,6 +357,9 @@ pub struct Joint {
     basis: DMatrix<f64>,
     /// (min_k, max_k) of each column of βB: the cheap feasibility bound of `surely_feasible`.
     col_range: Vec<(f32, f32)>,
+    /// The same bound as two lanes (min_k and max_k per column, zero-padded).
+    col_lo: Lane,
+    col_hi: Lane,
     mean_a_norm: f64,
 }
 
@@ -349,9 +375,10 @@ pub struct JointState {
     active: Vec<u8>,
     /// Constraint dual r ≤ 0, pixel-major (bands per pixel).
     r: Vec<f32>,
-    /// Proximal tables: M = (I + τη'Q)⁻¹, m_p = M a_p (J per pixel), t_p = τω_p y_p,
-    /// c_p = τω_p / (1 + τω_p a_pᵀm_p), k_p = a_pᵀ m_p and the cap (below).
-    mat: Vec<f32>,
+    /// Proximal tables: M = (I + τη'Q)⁻¹ (its J columns, a lane each), m_p = M a_p (J per
+    /// pixel), t_p = τω_p y_p, c_p = τω_p / (1 + τω_p a_pᵀm_p), k_p = a_pᵀ m_p and the cap
+    /// (below).
+    mat: Vec<Lane>,
     m: Vec<f32>,
     tck: Vec<[f32; 4]>,
     y: Vec<f32>,
@@ -366,6 +393,7 @@ pub struct JointState {
     pub lambda: f32,
     pub tau: f32,
     pub sigma: f32,
+    flush: f32,
     row_sums: Vec<f64>,
 }
 
@@ -441,6 +469,14 @@ impl Joint {
         // data Hessian is a aᵀ, so P is scaled by mean‖a‖² / ‖F‖²_F to keep the same balance.
         let prior_scale = mean_a2 / system.norm_squared();
         let nbp = bands.div_ceil(LANES) * LANES;
+        let col_range: Vec<(f32, f32)> = (0..j)
+            .map(|jj| {
+                let col = basis.column(jj) * beta;
+                (col.min() as f32, col.max() as f32)
+            })
+            .collect();
+        let bound =
+            |f: fn(&(f32, f32)) -> f32| std::array::from_fn(|l| col_range.get(l).map_or(0.0, f));
         Ok(Joint {
             file: file.to_string(),
             w,
@@ -459,15 +495,20 @@ impl Joint {
                     })
                 })
                 .collect(),
+            brow: (0..nbp)
+                .map(|k| {
+                    std::array::from_fn(|jj| match k < bands && jj < j {
+                        true => (beta * basis[(k, jj)]) as f32,
+                        false => 0.0,
+                    })
+                })
+                .collect(),
             nbp,
             eq: prior * prior_scale,
             norm_k: 4.0,
-            col_range: (0..j)
-                .map(|jj| {
-                    let col = basis.column(jj) * beta;
-                    (col.min() as f32, col.max() as f32)
-                })
-                .collect(),
+            col_lo: bound(|r| r.0),
+            col_hi: bound(|r| r.1),
+            col_range,
             system: system.clone(),
             basis: basis.clone(),
             mean_a_norm,
@@ -533,6 +574,7 @@ impl Joint {
             tau: 0.0,
             sigma: 0.0,
             row_sums: vec![0.0; h],
+            flush: 0.0,
         };
         self.set_lambda(&mut st, lambda)?;
         Ok(st)
@@ -579,13 +621,15 @@ impl Joint {
         &self,
         tau: f64,
         st: &JointState,
-    ) -> Result<(Vec<f32>, Vec<f32>, Vec<[f32; 4]>)> {
+    ) -> Result<(Vec<Lane>, Vec<f32>, Vec<[f32; 4]>)> {
         let (y, omega) = (&st.y, &st.omega);
         let (j, n) = (self.j, self.w * self.h);
         let mat = (DMatrix::identity(j, j) + tau * &self.eq)
             .try_inverse()
             .ok_or_else(|| Error::Numerical("joint: I + τη'Q is singular".into()))?;
-        let mat32: Vec<f32> = mat.iter().map(|&v| v as f32).collect();
+        let cols: Vec<Lane> = (0..j)
+            .map(|c| std::array::from_fn(|r| if r < j { mat[(r, c)] as f32 } else { 0.0 }))
+            .collect();
         let mut m = vec![0.0f32; n * j];
         let mut tck = vec![[0.0f32; 4]; n];
         m.par_chunks_mut(j)
@@ -593,12 +637,16 @@ impl Joint {
             .zip(self.a.par_chunks(j))
             .zip(y.par_iter().zip(omega.par_iter()).zip(&st.cap))
             .for_each(|(((mp, t), ap), ((&y, &om), &cap))| {
-                mat_vec(&mat32, ap, mp);
-                let k: f32 = ap.iter().zip(mp.iter()).map(|(a, b)| a * b).sum();
+                let k = with_basis_len!(j, J => {
+                    let a = Portable::load::<J>(ap);
+                    let ma = Portable::mat_vec::<J>(&cols, a);
+                    Portable::store::<J>(mp, ma);
+                    Portable::sum(Portable::mul(a, ma))
+                });
                 let tw = tau as f32 * om;
                 *t = [tw * y, tw / (1.0 + tw * k), k, cap];
             });
-        Ok((mat32, m, tck))
+        Ok((cols, m, tck))
     }
 
     /// Σ_p ω_p r_p² (r_p the data residual, one-sided where saturated) and the number of
@@ -644,6 +692,7 @@ impl Joint {
     fn dual_step(&self, st: &mut JointState, cost: bool) -> f64 {
         let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
         let (bar, alpha, sigma, lambda) = (&st.bar, &st.alpha, st.sigma, st.lambda);
+        let flush = st.flush;
         let tvw = &st.tvw;
         let data = DataTerm {
             y: &st.y,
@@ -674,7 +723,14 @@ impl Joint {
                         active: act,
                         weight: tvw,
                     };
-                    with_basis_len!(j, J => self.dual_row_simd::<J>(row, bar_row, (gx, gy), sigma, lambda));
+                    let step = DualStep {
+                        gx,
+                        gy,
+                        sigma,
+                        lambda,
+                        flush,
+                    };
+                    with_basis_len!(j, J => self.dual_row_simd::<J>(row, bar_row, step));
                 },
             );
         st.row_sums.iter().sum()
@@ -691,28 +747,12 @@ impl Joint {
         }
     }
 
-    /// (βBᵀr)_jj over the padded bands, in `LANES` partial sums (a vectorised dot product).
-    #[inline]
-    fn basis_t_times(&self, jj: usize, r: &[f32]) -> f32 {
-        let col = &self.bcol[jj * self.nbp..(jj + 1) * self.nbp];
-        let mut acc = [0.0f32; LANES];
-        for (c, rr) in col.chunks_exact(LANES).zip(r.chunks_exact(LANES)) {
-            for l in 0..LANES {
-                acc[l] += c[l] * rr[l];
-            }
-        }
-        acc.iter().sum()
-    }
-
     /// True when min_k Σ_j βB_kj α_j ≥ 0 follows from the per-column extremes of βB alone.
-    #[inline]
-    fn surely_feasible(&self, alpha: &[f32]) -> bool {
-        let lower: f32 = alpha
-            .iter()
-            .zip(&self.col_range)
-            .map(|(&a, &(lo, hi))| if a >= 0.0 { a * lo } else { a * hi })
-            .sum();
-        lower >= 0.0
+    #[inline(always)]
+    fn surely_feasible<L: Lanes>(&self, alpha: L::V) -> bool {
+        let low = L::mul(alpha, L::load::<LANES>(&self.col_lo));
+        let high = L::mul(alpha, L::load::<LANES>(&self.col_hi));
+        L::sum(L::select_nonneg(alpha, low, high)) >= 0.0
     }
 
     /// Row `yy`'s share of the objective Σ ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖, in f64 in pixel
@@ -797,20 +837,20 @@ impl Joint {
     }
 
     /// The dual update of one row given ∇ᾱ there (gx, gy): q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel,
-    /// r ← min(r + σβBᾱ, 0) where r ≠ 0 or Bᾱ may be negative, each result t stored relaxed as
-    /// t + (γ − 1)(t − old). J is the basis length, fixed per compiled copy so the per-pixel
-    /// loops unroll.
+    /// r ← min(r + σβBᾱ, 0) where r ≠ 0 or Bᾱ is negative, each result t stored relaxed as
+    /// t + (γ − 1)(t − old), and values of r under the flush threshold set to 0 (r's only
+    /// write: a pixel with r = 0 and Bᾱ ≥ 0 is not touched). J is the basis length, fixed per compiled copy, and `L` the lanes
+    /// a pixel's J coefficients and its bands are computed in.
     #[inline(always)]
-    fn dual_row<const J: usize>(
-        &self,
-        row: DualRow<'_>,
-        bar: &[f32],
-        gx: &[f32],
-        gy: &[f32],
-        sigma: f32,
-        lambda: f32,
-    ) {
+    fn dual_row<const J: usize, L: Lanes>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
         let (nb, over) = (self.nbp, self.cfg.relaxation as f32 - 1.0);
+        let DualStep {
+            gx,
+            gy,
+            sigma,
+            lambda,
+            flush,
+        } = step;
         let pixels = row.qx.chunks_exact_mut(J).zip(row.qy.chunks_exact_mut(J));
         let grads = gx.chunks_exact(J).zip(gy.chunks_exact(J));
         let rest = bar
@@ -818,85 +858,84 @@ impl Joint {
             .zip(row.r.chunks_exact_mut(nb))
             .zip(row.active.iter_mut().zip(row.weight));
         for (((qx, qy), (gx, gy)), ((bp, rp), (act, &wp))) in pixels.zip(grads).zip(rest) {
-            let lambda = lambda * wp;
-            let mut t: [[f32; J]; 2] = [
-                std::array::from_fn(|jj| qx[jj] + sigma * gx[jj]),
-                std::array::from_fn(|jj| qy[jj] + sigma * gy[jj]),
-            ];
-            let n2: f32 = t.iter().flatten().map(|v| v * v).sum();
-            let f = ball_factor(n2, lambda);
-            t.iter_mut().flatten().for_each(|v| *v *= f);
-            relax(qx, &t[0], over);
-            relax(qy, &t[1], over);
-            if *act == 0 && self.surely_feasible(bp) {
+            let (ox, oy) = (L::load::<J>(qx), L::load::<J>(qy));
+            let tx = L::add_scaled(ox, sigma, L::load::<J>(gx));
+            let ty = L::add_scaled(oy, sigma, L::load::<J>(gy));
+            let n2 = L::sum(L::add(L::mul(tx, tx), L::mul(ty, ty)));
+            let f = L::splat(ball_factor(n2, lambda * wp));
+            L::store::<J>(qx, relaxed::<L>(ox, L::mul(tx, f), over));
+            L::store::<J>(qy, relaxed::<L>(oy, L::mul(ty, f), over));
+            let bl = L::load::<J>(bp);
+            if *act == 0 && self.surely_feasible::<L>(bl) {
                 continue;
             }
-            let mut u = [0.0f32; MAX_BANDS];
-            self.basis_times(bp, &mut u[..nb]);
-            // Counted, not searched with an early exit: the count vectorises with the update.
-            // Relaxed (γ > 1), r may leave r ≤ 0, so the flag is r ≠ 0.
+            let bl = L::to_array(bl);
+            // βBᾱ a block of bands at a time, summed over the columns in order.
+            let mut u = [L::splat(0.0); MAX_BANDS / LANES];
+            for (k, uk) in u[..nb / LANES].iter_mut().enumerate() {
+                for (col, &a) in self.bcol.chunks_exact(nb).zip(&bl[..J]) {
+                    *uk = L::add(
+                        *uk,
+                        L::mul(L::load::<LANES>(&col[k * LANES..]), L::splat(a)),
+                    );
+                }
+            }
+            // With r = 0 and βBᾱ ≥ 0 the update leaves r = 0 exactly: r is not touched.
+            if *act == 0 && u.iter().all(|&uk| L::nonzero(L::min0(uk)) == 0) {
+                continue;
+            }
+            // r ← min(r + σβBᾱ, 0), relaxed. Relaxed (γ > 1), r may leave r ≤ 0, so the flag
+            // counts r ≠ 0 (no early exit: the count vectorises with the update).
             let mut nonzero = 0u32;
-            for (rk, uk) in rp.iter_mut().zip(&u[..nb]) {
-                let next = (*rk + sigma * uk).min(0.0);
-                *rk = next + over * (next - *rk);
-                nonzero += (*rk != 0.0) as u32;
+            for (rb, &uk) in rp.chunks_exact_mut(LANES).zip(&u) {
+                let old = L::load::<LANES>(rb);
+                let next = relaxed::<L>(old, L::min0(L::add_scaled(old, sigma, uk)), over);
+                let next = L::flush(next, flush);
+                L::store::<LANES>(rb, next);
+                nonzero += L::nonzero(next);
             }
             *act = (nonzero > 0) as u8;
         }
     }
 
-    /// [`Joint::dual_row`], compiled for AVX2 when the CPU has it: the same operations in the
-    /// same order on wider registers (no fused multiply–add), so the same bits.
-    fn dual_row_simd<const J: usize>(
-        &self,
-        row: DualRow<'_>,
-        bar: &[f32],
-        (gx, gy): (&[f32], &[f32]),
-        sigma: f32,
-        lambda: f32,
-    ) {
+    /// [`Joint::dual_row`] on AVX registers when the CPU has AVX2, else on plain arrays (the
+    /// same operations in the same order, so the same bits).
+    fn dual_row_simd<const J: usize>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2, the one feature the copy is compiled for.
-            return unsafe { self.dual_row_avx2::<J>(row, bar, (gx, gy), sigma, lambda) };
+            return unsafe { self.dual_row_avx2::<J>(row, bar, step) };
         }
-        self.dual_row::<J>(row, bar, gx, gy, sigma, lambda)
+        self.dual_row::<J, lane::Portable>(row, bar, step)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn dual_row_avx2<const J: usize>(
-        &self,
-        row: DualRow<'_>,
-        bar: &[f32],
-        (gx, gy): (&[f32], &[f32]),
-        sigma: f32,
-        lambda: f32,
-    ) {
-        self.dual_row::<J>(row, bar, gx, gy, sigma, lambda)
+    unsafe fn dual_row_avx2<const J: usize>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
+        self.dual_row::<J, lane::Avx>(row, bar, step)
     }
 
-    /// [`Joint::primal_row`], compiled for AVX2 when the CPU has it (as [`Joint::dual_row_simd`]).
-    fn primal_row_simd<const J: usize>(&self, row: PrimalRow<'_>, mat: &[f32], tau: f32) {
+    /// [`Joint::primal_row`] on AVX registers when the CPU has AVX2 (as [`Joint::dual_row_simd`]).
+    fn primal_row_simd<const J: usize>(&self, row: PrimalRow<'_>, mat: &[Lane], tau: f32) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2, the one feature the copy is compiled for.
             return unsafe { self.primal_row_avx2::<J>(row, mat, tau) };
         }
-        self.primal_row::<J>(row, mat, tau)
+        self.primal_row::<J, lane::Portable>(row, mat, tau)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn primal_row_avx2<const J: usize>(&self, row: PrimalRow<'_>, mat: &[f32], tau: f32) {
-        self.primal_row::<J>(row, mat, tau)
+    unsafe fn primal_row_avx2<const J: usize>(&self, row: PrimalRow<'_>, mat: &[Lane], tau: f32) {
+        self.primal_row::<J, lane::Avx>(row, mat, tau)
     }
 
     /// The primal update of one row given div q there: α⁺ = prox_{τf}(x + τ(div q − βBᵀr)),
-    /// ᾱ = 2α⁺ − x (x = α + (γ − 1)(ᾱ − α), the relaxed point), with J fixed per compiled
-    /// copy as in [`Joint::dual_row`].
+    /// ᾱ = 2α⁺ − x (x = α + (γ − 1)(ᾱ − α), the relaxed point), with J and the lanes as in
+    /// [`Joint::dual_row`].
     #[inline(always)]
-    fn primal_row<const J: usize>(&self, row: PrimalRow<'_>, mat: &[f32], tau: f32) {
+    fn primal_row<const J: usize, L: Lanes>(&self, row: PrimalRow<'_>, mat: &[Lane], tau: f32) {
         let nb = self.nbp;
         let pixels = row
             .alpha
@@ -912,18 +951,15 @@ impl Joint {
         for (((ap, bp), (mp, tck)), ((div, &act), rp)) in pixels.zip(tables).zip(duals) {
             // The relaxed primal point x = α⁻ + γ(α − α⁻), with α⁻ = 2α − ᾱ the point the
             // last prox step started from.
-            let x: [f32; J] = std::array::from_fn(|jj| ap[jj] + over * (bp[jj] - ap[jj]));
-            let mut v: [f32; J] = std::array::from_fn(|jj| x[jj] + tau * div[jj]);
+            let a = L::load::<J>(ap);
+            let x = L::add_scaled(a, over, L::sub(L::load::<J>(bp), a));
+            let mut v = L::add_scaled(x, tau, L::load::<J>(div));
             if act != 0 {
-                for (jj, vj) in v.iter_mut().enumerate() {
-                    *vj -= tau * self.basis_t_times(jj, rp);
-                }
+                v = L::sub(v, L::mul(L::splat(tau), L::rows_t_times(&self.brow, rp)));
             }
-            let mv = prox_pixel::<J>(mat, mp, *tck, &v);
-            for jj in 0..J {
-                bp[jj] = 2.0 * mv[jj] - x[jj];
-                ap[jj] = mv[jj];
-            }
+            let mv = prox_pixel::<J, L>(mat, L::load::<J>(mp), *tck, v);
+            L::store::<J>(bp, L::sub(L::add(mv, mv), x));
+            L::store::<J>(ap, mv);
         }
     }
 
@@ -981,6 +1017,8 @@ impl Joint {
     /// the start only) and after the last.
     fn iterate(&self, st: &mut JointState, iterations: usize, stages: Stages) -> Result<Vec<f64>> {
         let mut objective = Vec::with_capacity(iterations + 1);
+        // f32 as on the GPU (`flush_start`), which then decays it the same way.
+        st.flush = self.cfg.dual_flush as f32 * st.lambda;
         if !self.cfg.trace_objective {
             objective.push(self.objective(st));
         }
@@ -997,6 +1035,7 @@ impl Joint {
             } else {
                 self.step_untraced(st);
             }
+            st.flush *= FLUSH_DECAY;
         }
         objective.push(self.objective(st));
         Ok(objective)
@@ -1058,6 +1097,7 @@ impl Joint {
             lambda: st.lambda as f64,
             steps: [st.tau as f64, st.sigma as f64],
             relaxation: (self.cfg.prior == Prior::Tv).then_some(self.cfg.relaxation),
+            dual_flush: (self.cfg.prior == Prior::Tv).then_some(self.cfg.dual_flush),
             violation: 0.0,
             seconds: t0.elapsed().as_secs_f64(),
             prior: format!("{:?}", self.cfg.prior).to_lowercase(),
@@ -1123,9 +1163,14 @@ impl Joint {
             let mut out = vec![0.0f32; n * j];
             for (yy, orow) in out.chunks_mut(w * j).enumerate() {
                 row_divergence(&gx, &gy, w, j, yy, &mut div);
-                for (i, o) in orow.iter_mut().enumerate() {
-                    let p = yy * w + i / j;
-                    *o = self.basis_t_times(i % j, &bv[p * nb..(p + 1) * nb]) - div[i];
+                let pixels = orow.chunks_exact_mut(j).zip(div.chunks_exact(j));
+                for (x, (o, d)) in pixels.enumerate() {
+                    let p = yy * w + x;
+                    let btr = Portable::rows_t_times(&self.brow, &bv[p * nb..(p + 1) * nb]);
+                    o.iter_mut()
+                        .zip(btr)
+                        .zip(d)
+                        .for_each(|((o, b), d)| *o = b - d);
                 }
             }
             est = out.iter().zip(&v).map(|(a, b)| (a * b) as f64).sum::<f64>();
@@ -1270,12 +1315,18 @@ impl JointState {
     }
 }
 
+/// The decay per iteration of the flush threshold of r (`JointConfig::dual_flush`): a
+/// geometric series, so the values flushed over a run have a finite sum (an inexact
+/// Krasnosel'skii–Mann iteration with summable errors converges as the exact one; Combettes
+/// 2004), and slower than the (1 − γ)ⁿ decay of an idle band's dual at γ = 1.8, so those reach it.
+const FLUSH_DECAY: f32 = 0.98;
+
 /// Largest J the per-pixel kernels handle on the stack.
 pub const MAX_J: usize = crate::unmix::MAX_BASIS;
+// A pixel's coefficients fit one lane (`lane::Lane`).
+const _: () = assert!(MAX_J <= LANES);
 /// Largest number of bands (padded) the per-pixel kernels handle on the stack.
 const MAX_BANDS: usize = crate::unmix::MAX_BANDS;
-/// f32 lanes the band loops are padded to (one AVX register).
-const LANES: usize = 8;
 
 /// `$body` with the constant `$J` equal to the basis length `$j` (1..=MAX_J, checked by
 /// [`Joint::new`]): the per-pixel kernels are compiled once per J.
@@ -1327,6 +1378,16 @@ struct DualRow<'a> {
     r: &'a mut [f32],
     active: &'a mut [u8],
     weight: &'a [f32],
+}
+
+/// What one row's dual update reads besides its duals: ∇ᾱ there, σ and λ.
+#[derive(Clone, Copy)]
+struct DualStep<'a> {
+    gx: &'a [f32],
+    gy: &'a [f32],
+    sigma: f32,
+    lambda: f32,
+    flush: f32,
 }
 
 /// One row's data for its share of the objective: α, a, y, ω and the row's ∇α.
@@ -1383,21 +1444,11 @@ fn ball_factor(n2: f32, r: f32) -> f32 {
     }
 }
 
-/// q ← t + (γ − 1)(t − q): the relaxed dual from the step's result t (exactly t at γ = 1).
+/// The relaxed dual t + (γ − 1)(t − q) of the step's result t, from the old q (exactly t at
+/// γ = 1).
 #[inline(always)]
-fn relax(q: &mut [f32], t: &[f32], over: f32) {
-    for (qv, &tv) in q.iter_mut().zip(t) {
-        *qv = tv + over * (tv - *qv);
-    }
-}
-
-/// out = M v for a J × J matrix stored column-major (nalgebra's order; M is symmetric anyway).
-#[inline]
-fn mat_vec(mat: &[f32], v: &[f32], out: &mut [f32]) {
-    let j = v.len();
-    for (r, o) in out.iter_mut().enumerate() {
-        *o = (0..j).map(|c| mat[c * j + r] * v[c]).sum();
-    }
+fn relaxed<L: Lanes>(q: L::V, t: L::V, over: f32) -> L::V {
+    L::add_scaled(t, over, L::sub(t, q))
 }
 
 /// prox_{τf}(v) of one pixel, f = ½ω(y − aᵀα)² + ½αᵀη'Qα: (I + τH)⁻¹(v + τωya) by
@@ -1405,25 +1456,21 @@ fn mat_vec(mat: &[f32], v: &[f32], out: &mut [f32]) {
 /// (t, c, k, cap) (`prox_tables`); for a saturated pixel (cap = y) the data term is
 /// ½ω·max(0, y − aᵀα)². J fixed per compiled copy.
 #[inline(always)]
-fn prox_pixel<const J: usize>(
-    mat: &[f32],
-    mp: &[f32],
+fn prox_pixel<const J: usize, L: Lanes>(
+    mat: &[Lane],
+    mp: L::V,
     [t, c, k, cap]: [f32; 4],
-    v: &[f32; J],
-) -> [f32; J] {
-    let mut out: [f32; J] =
-        std::array::from_fn(|r| (0..J).map(|col| mat[col * J + r] * v[col]).sum());
+    v: L::V,
+) -> L::V {
+    let out = L::mat_vec::<J>(mat, v);
     // aᵀMv = m_pᵀv: the fit without the data term. A saturated pixel whose fit reaches its
     // reading keeps it (its one-sided term is zero there); else the full quadratic's step.
-    let mtv: f32 = mp.iter().zip(v).map(|(a, b)| a * b).sum();
+    let mtv = L::sum(L::mul(mp, v));
     let coef = match mtv >= cap {
         true => 0.0,
         false => t - c * (mtv + t * k),
     };
-    for (o, m) in out.iter_mut().zip(mp) {
-        *o += coef * m;
-    }
-    out
+    L::add_scaled(out, coef, mp)
 }
 
 /// What happens between the iterations of a run (`Joint::iterate`); the default: nothing.
@@ -1933,12 +1980,53 @@ mod tests {
             tau: s.tau,
             sigma: s.sigma,
             row_sums: s.row_sums.clone(),
+            flush: s.flush,
         }
     }
 
     /// With η = 0 a constant α field fitting y = Aα exactly has objective 0, the least any
     /// field can have, and no other field reaches it (zero TV means constant, and the patterns
     /// vary enough across the frame that one constant fits): the exact minimiser.
+    #[test]
+    fn flushing_the_dual_keeps_the_iterate_and_idles_the_constraint() {
+        // The test's scene at 32² with a strong second coefficient in its block rows, so
+        // that Bα < 0 at the red end there and the constraint holds at the minimiser; γ = 1.8,
+        // 300 iterations, exact and flushed (the default).
+        let mut t = truth(32, 32);
+        t.plane_mut(1)[8 * 32..16 * 32].fill(1.6);
+        let run = |dual_flush: f64| {
+            let cfg = JointConfig {
+                iterations: 300,
+                tv_weight: 0.01,
+                dual_flush,
+                ..Default::default()
+            };
+            let j = solver(32, 1.0, cfg);
+            let mut st = j.start(&frame_of(&j, &t), &flat_seed(&t), None).unwrap();
+            j.iterate(&mut st, 300, Stages::default()).unwrap();
+            let live = st.active.iter().filter(|&&a| a != 0).count();
+            let tiny =
+                st.r.iter()
+                    .filter(|&&v| v != 0.0 && v.abs() < 1e-3 * st.lambda)
+                    .count();
+            (st.alpha, live, tiny)
+        };
+        let (exact, live_exact, tiny_exact) = run(0.0);
+        let (flushed, live_flushed, tiny_flushed) = run(JointConfig::default().dual_flush);
+        let norm = |v: &[f32]| v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt();
+        let diff: Vec<f32> = exact.iter().zip(&flushed).map(|(a, b)| a - b).collect();
+        let rel = norm(&diff) / norm(&exact);
+        eprintln!(
+            "α flushed vs exact {rel:.2e}; pixels with r ≠ 0: {live_exact} → {live_flushed}; \
+             values 0 < |r| < 1e-3 λ: {tiny_exact} → {tiny_flushed}"
+        );
+        // Exact, an idle band's r only decays (0.8ⁿ at γ = 1.8) and is never zero: the
+        // flushed run has none of those left, fewer live pixels and the same iterate.
+        assert!(tiny_exact > 0 && tiny_flushed == 0);
+        assert!(live_flushed < live_exact);
+        assert!(rel < 1e-4, "α moved by {rel:.2e}");
+    }
+
     #[test]
     fn a_cube_in_the_range_is_recovered() {
         // The relaxed iteration is slower in this test's tail (1.8e-4 after 2000 iterations,
@@ -2191,6 +2279,20 @@ mod tests {
                     ..cfg.clone()
                 },
                 "`reconstruct.joint.reweight_rounds` = 10: needs fewer rounds than iterations (5)",
+            ),
+            (
+                JointConfig {
+                    dual_flush: -1e-3,
+                    ..cfg.clone()
+                },
+                "`reconstruct.joint.dual_flush` = -0.001: must be finite and ≥ 0",
+            ),
+            (
+                JointConfig {
+                    dual_flush: f64::INFINITY,
+                    ..cfg.clone()
+                },
+                "`reconstruct.joint.dual_flush` = inf:",
             ),
             (
                 JointConfig {

@@ -40,7 +40,9 @@ struct Params {
     over: f32,
     /// Reweighted TV: ε per mean ‖∇α‖ (`reweight_eps`).
     eps: f32,
-    _pad: [u32; 3],
+    /// The flush threshold of r per λ at a run's first iteration (`dual_flush`).
+    flush: f32,
+    _pad: [u32; 2],
 }
 
 /// The iterate and dual variables read back, plane-major (value k of pixel p at k·npx + p).
@@ -65,6 +67,8 @@ pub struct GpuJoint {
     trace: bool,
     /// Over-relaxation γ (reported in the stats).
     relaxation: f64,
+    /// `dual_flush` (reported in the stats).
+    dual_flush: f64,
     /// The spectral prior (reported in the stats).
     spectral_prior: SpectralPrior,
     /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
@@ -88,6 +92,8 @@ pub struct GpuJoint {
     /// Σ of the pixel costs appended to the objective list.
     cost_sum: [Launch; 2],
     primal: Launch,
+    /// The flush threshold of r set (`flush_start`) and decayed (`flush_decay`).
+    flush: [Launch; 2],
     /// ‖∇α‖ per pixel, its mean appended to the reweighting's list, the new TV weights.
     reweight: Vec<Launch>,
     /// The pixel costs at the current α (the objective after the last step).
@@ -211,6 +217,7 @@ impl GpuJoint {
             iterations: t.config.iterations,
             trace: t.config.trace_objective,
             relaxation: t.config.relaxation,
+            dual_flush: t.config.dual_flush,
             spectral_prior: t.config.spectral_prior,
             reweights: t.config.reweight_rounds,
             j,
@@ -237,6 +244,11 @@ impl GpuJoint {
                 pixels,
             ),
             reweight,
+            flush: [
+                launch("flush_start", &[(3, &b.scalars)], [1, 1, 1]),
+                // No uniform: the decay is the shader's constant.
+                Launch::bound(ctx, &module, "flush_decay", &[(3, &b.scalars)], [1, 1, 1]),
+            ],
             cost: launch("objective", &joined(&common, &[(7, &b.cost)]), pixels),
             residual: {
                 let [sum, finish] =
@@ -340,6 +352,7 @@ impl GpuJoint {
     fn encode_iterations(&self, enc: &mut wgpu::CommandEncoder) {
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
+            self.flush[0].record(&mut cp);
             for it in 0..self.iterations {
                 if rebalances_before(it, self.iterations) {
                     self.rebalance.iter().for_each(|l| l.record(&mut cp));
@@ -349,6 +362,7 @@ impl GpuJoint {
                 }
                 self.record_dual(&mut cp);
                 self.primal.record(&mut cp);
+                self.flush[1].record(&mut cp);
             }
         }
     }
@@ -434,9 +448,11 @@ impl GpuJoint {
         {
             let mut cp = enc.begin_compute_pass(&Default::default());
             self.relambda.iter().for_each(|l| l.record(&mut cp));
+            self.flush[0].record(&mut cp);
             for _ in 0..iterations {
                 self.dual.record(&mut cp);
                 self.primal.record(&mut cp);
+                self.flush[1].record(&mut cp);
             }
             self.residual.iter().for_each(|l| l.record(&mut cp));
         }
@@ -535,6 +551,7 @@ impl GpuJoint {
             steps: [f(tail + 4), f(tail + 5)],
             violation: if hi > 0.0 { neg / hi } else { 0.0 },
             relaxation: Some(self.relaxation),
+            dual_flush: Some(self.dual_flush),
             prior: "tv".into(),
             spectral_prior: self.spectral_prior.name().into(),
             reweight_rounds: self.reweights,
@@ -645,7 +662,8 @@ fn params(joint: &Joint) -> Params {
         step: (t.step_product.sqrt() / t.operator_norm) as f32,
         over: (t.config.relaxation - 1.0) as f32,
         eps: t.config.reweight_eps as f32,
-        _pad: [0; 3],
+        flush: t.config.dual_flush as f32,
+        _pad: [0; 2],
     }
 }
 

@@ -12,6 +12,7 @@
 //! second copy z₂ = P_C(x + u₂) (consensus ADMM: x against (z, z₂), still two blocks, so the
 //! same argument holds); the output is then z₂, feasible.
 
+use super::lane::{Lanes, Portable};
 use super::{from_pixel_major, prox_pixel, with_basis_len, Joint, JointStats, MAX_J};
 use crate::denoise::GraphSmoother;
 use crate::error::{Error, Result};
@@ -109,8 +110,8 @@ pub fn run(
                     }
                 }
                 with_basis_len!(j, J => {
-                    let v: [f32; J] = std::array::from_fn(|k| v[k]);
-                    xp.copy_from_slice(&prox_pixel::<J>(&mat, mp, t, &v));
+                    let out = prox_pixel::<J, Portable>(&mat, Portable::load::<J>(mp), t, v);
+                    Portable::store::<J>(xp, out);
                 });
             });
         // s.scratch = x + u: the smoother's input and, before the freeze, its guide.

@@ -18,7 +18,8 @@ struct Params {
     over: f32,
     // Reweighted TV: ε per mean ‖∇α‖ (`reweight_eps`).
     eps: f32,
-    _pad0: u32,
+    // The flush threshold of r per λ at a run's first iteration (`dual_flush`).
+    flush: f32,
     _pad1: u32,
     _pad2: u32,
 }
@@ -30,7 +31,8 @@ const LANES: u32 = 8u;
 
 // `rig`, per rig: a (J planes) | βB by columns (J × NBP) | column minima (J) | maxima (J) |
 // η'Q (J × J, row-major) | its eigenvectors (J × J, column i the i-th) | eigenvalues (J).
-// `sc`, per frame: [count, mean|y|] (a list the sum appends to), –, λ, τ, σ, –, –,
+// `sc`, per frame: [count, mean|y|] (a list the sum appends to), –, λ, τ, σ, the flush
+// threshold of r, –,
 // then M = (I + τη'Q)⁻¹ (J × J, column-major as on the CPU).
 // `tab`, per frame: m = M a (J planes) | t = τωy | c = τω/(1 + τω aᵀm) | k = aᵀm | ω | the TV
 // weight w (1 unless reweighted) | the saturation flag (1 where the pixel reads the camera's
@@ -59,6 +61,9 @@ const LANES: u32 = 8u;
 const SC_LAMBDA: u32 = 3u;
 const SC_TAU: u32 = 4u;
 const SC_SIGMA: u32 = 5u;
+const SC_FLUSH: u32 = 6u;
+// The flush threshold's decay per iteration (the CPU's `FLUSH_DECAY`).
+const FLUSH_DECAY: f32 = 0.98;
 const SC_MAT: u32 = 8u;
 const ALPHA: u32 = 0u;
 const BAR: u32 = J;
@@ -374,13 +379,27 @@ fn dual(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         }
         let old = r[at(k, p)];
         let next = min(old + sigma * u, 0.0);
-        let v = next + prm.over * (next - old);
+        let relaxed = next + prm.over * (next - old);
+        // Values under the flush threshold set to 0 (the CPU's `dual_flush`).
+        let v = select(relaxed, 0.0, abs(relaxed) < sc[SC_FLUSH]);
         r[at(k, p)] = v;
         if v != 0.0 {
             flag = 1.0;
         }
     }
     r[at(NBP, p)] = flag;
+}
+
+// ---- flush_start (one invocation, before a run's or a trial's iterations): the threshold
+// dual_flush·λ; flush_decay (one invocation, after each iteration): × FLUSH_DECAY.
+@compute @workgroup_size(1)
+fn flush_start() {
+    sc[SC_FLUSH] = prm.flush * sc[SC_LAMBDA];
+}
+
+@compute @workgroup_size(1)
+fn flush_decay() {
+    sc[SC_FLUSH] = sc[SC_FLUSH] * FLUSH_DECAY;
 }
 
 // ---- grad_norm (per pixel): g_p = ‖∇α(p)‖ into `cost`, the reweighting's input (its mean
