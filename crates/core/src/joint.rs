@@ -836,11 +836,10 @@ impl Joint {
             );
     }
 
-    /// The dual update of one row given ∇ᾱ there (gx, gy): q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel,
-    /// r ← min(r + σβBᾱ, 0) where r ≠ 0 or Bᾱ is negative, each result t stored relaxed as
-    /// t + (γ − 1)(t − old), and values of r under the flush threshold set to 0 (r's only
-    /// write: a pixel with r = 0 and Bᾱ ≥ 0 is not touched). J is the basis length, fixed per compiled copy, and `L` the lanes
-    /// a pixel's J coefficients and its bands are computed in.
+    /// The dual update of one row given ∇ᾱ there (gx, gy): q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel
+    /// and r by [`Joint::constraint_dual`], each result t stored relaxed as t + (γ − 1)(t − old).
+    /// J is the basis length, fixed per compiled copy, and `L` the lanes a pixel's J
+    /// coefficients and its bands are computed in.
     #[inline(always)]
     fn dual_row<const J: usize, L: Lanes>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
         let (nb, over) = (self.nbp, self.cfg.relaxation as f32 - 1.0);
@@ -869,33 +868,46 @@ impl Joint {
             if *act == 0 && self.surely_feasible::<L>(bl) {
                 continue;
             }
-            let bl = L::to_array(bl);
-            // βBᾱ a block of bands at a time, summed over the columns in order.
-            let mut u = [L::splat(0.0); MAX_BANDS / LANES];
-            for (k, uk) in u[..nb / LANES].iter_mut().enumerate() {
-                for (col, &a) in self.bcol.chunks_exact(nb).zip(&bl[..J]) {
-                    *uk = L::add(
-                        *uk,
-                        L::mul(L::load::<LANES>(&col[k * LANES..]), L::splat(a)),
-                    );
-                }
-            }
-            // With r = 0 and βBᾱ ≥ 0 the update leaves r = 0 exactly: r is not touched.
-            if *act == 0 && u.iter().all(|&uk| L::nonzero(L::min0(uk)) == 0) {
-                continue;
-            }
-            // r ← min(r + σβBᾱ, 0), relaxed. Relaxed (γ > 1), r may leave r ≤ 0, so the flag
-            // counts r ≠ 0 (no early exit: the count vectorises with the update).
-            let mut nonzero = 0u32;
-            for (rb, &uk) in rp.chunks_exact_mut(LANES).zip(&u) {
-                let old = L::load::<LANES>(rb);
-                let next = relaxed::<L>(old, L::min0(L::add_scaled(old, sigma, uk)), over);
-                let next = L::flush(next, flush);
-                L::store::<LANES>(rb, next);
-                nonzero += L::nonzero(next);
-            }
-            *act = (nonzero > 0) as u8;
+            self.constraint_dual::<J, L>(L::to_array(bl), rp, act, (sigma, over, flush));
         }
+    }
+
+    /// r ← min(r + σβBᾱ, 0) of one pixel, relaxed, with the values under the flush threshold
+    /// set to 0, and its flag (r ≠ 0 somewhere). A pixel with r = 0 and βBᾱ ≥ 0 in every band
+    /// would keep r = 0 exactly, so its r is not touched.
+    #[inline(always)]
+    fn constraint_dual<const J: usize, L: Lanes>(
+        &self,
+        bl: Lane,
+        rp: &mut [f32],
+        act: &mut u8,
+        (sigma, over, flush): (f32, f32, f32),
+    ) {
+        let nb = self.nbp;
+        // βBᾱ a block of bands at a time, summed over the columns in order.
+        let mut u = [L::splat(0.0); MAX_BANDS / LANES];
+        for (k, uk) in u[..nb / LANES].iter_mut().enumerate() {
+            for (col, &a) in self.bcol.chunks_exact(nb).zip(&bl[..J]) {
+                *uk = L::add(
+                    *uk,
+                    L::mul(L::load::<LANES>(&col[k * LANES..]), L::splat(a)),
+                );
+            }
+        }
+        if *act == 0 && u.iter().all(|&uk| L::nonzero(L::min0(uk)) == 0) {
+            return;
+        }
+        // Relaxed (γ > 1), r may leave r ≤ 0, so the flag counts r ≠ 0 (no early exit: the
+        // count vectorises with the update).
+        let mut nonzero = 0u32;
+        for (rb, &uk) in rp.chunks_exact_mut(LANES).zip(&u) {
+            let old = L::load::<LANES>(rb);
+            let next = relaxed::<L>(old, L::min0(L::add_scaled(old, sigma, uk)), over);
+            let next = L::flush(next, flush);
+            L::store::<LANES>(rb, next);
+            nonzero += L::nonzero(next);
+        }
+        *act = (nonzero > 0) as u8;
     }
 
     /// [`Joint::dual_row`] on AVX registers when the CPU has AVX2, else on plain arrays (the
