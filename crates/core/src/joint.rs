@@ -22,7 +22,7 @@ pub mod discrepancy;
 mod lane;
 mod pnp;
 
-use lane::{Lane, Lanes, Portable, LANES};
+use lane::{Lane, LaneKernel, Lanes, Portable, LANES};
 
 /// τσ‖K‖² of the step sizes: below the bound 1 of Chambolle–Pock's convergence theorem.
 const STEP_PRODUCT: f64 = 0.98;
@@ -277,8 +277,8 @@ pub struct JointStats {
     /// before it existed, which ran γ = 1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relaxation: Option<f64>,
-    /// `dual_flush` of the run (absent for plug-and-play, on the GPU, which runs the exact
-    /// iteration, and in reports made before it existed).
+    /// `dual_flush` of the run (absent for plug-and-play and in reports made before it
+    /// existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dual_flush: Option<f64>,
     /// Largest −(Bα)_k over the pixels and bands, relative to the largest (Bα)_k: the
@@ -730,21 +730,32 @@ impl Joint {
                         lambda,
                         flush,
                     };
-                    with_basis_len!(j, J => self.dual_row_simd::<J>(row, bar_row, step));
+                    with_basis_len!(j, J => lane::dispatch(DualKernel::<J> {
+                        joint: self,
+                        row,
+                        bar: bar_row,
+                        step,
+                    }));
                 },
             );
         st.row_sums.iter().sum()
     }
 
-    /// u = βBα on the padded bands (a sum of scaled columns: vectorises over the bands).
-    #[inline]
-    fn basis_times(&self, alpha: &[f32], u: &mut [f32]) {
-        u.fill(0.0);
-        for (col, &a) in self.bcol.chunks_exact(self.nbp).zip(alpha) {
-            for (uk, bk) in u.iter_mut().zip(col) {
-                *uk += bk * a;
+    /// βBα on the padded bands, a block of `LANES` bands at a time (the columns summed in
+    /// order); the blocks past the padded bands stay 0.
+    #[inline(always)]
+    fn basis_times<const J: usize, L: Lanes>(&self, alpha: &Lane) -> [L::V; MAX_BANDS / LANES] {
+        let nb = self.nbp;
+        let mut u = [L::splat(0.0); MAX_BANDS / LANES];
+        for (k, uk) in u[..nb / LANES].iter_mut().enumerate() {
+            for (col, &a) in self.bcol.chunks_exact(nb).zip(&alpha[..J]) {
+                *uk = L::add(
+                    *uk,
+                    L::mul(L::load::<LANES>(&col[k * LANES..]), L::splat(a)),
+                );
             }
         }
+        u
     }
 
     /// True when min_k Σ_j βB_kj α_j ≥ 0 follows from the per-column extremes of βB alone.
@@ -831,7 +842,12 @@ impl Joint {
                         m: &m[px.start * j..px.end * j],
                         tck: &tck[px],
                     };
-                    with_basis_len!(j, J => self.primal_row_simd::<J>(row, mat, tau));
+                    with_basis_len!(j, J => lane::dispatch(PrimalKernel::<J> {
+                        joint: self,
+                        row,
+                        mat,
+                        tau,
+                    }));
                 },
             );
     }
@@ -883,17 +899,7 @@ impl Joint {
         act: &mut u8,
         (sigma, over, flush): (f32, f32, f32),
     ) {
-        let nb = self.nbp;
-        // βBᾱ a block of bands at a time, summed over the columns in order.
-        let mut u = [L::splat(0.0); MAX_BANDS / LANES];
-        for (k, uk) in u[..nb / LANES].iter_mut().enumerate() {
-            for (col, &a) in self.bcol.chunks_exact(nb).zip(&bl[..J]) {
-                *uk = L::add(
-                    *uk,
-                    L::mul(L::load::<LANES>(&col[k * LANES..]), L::splat(a)),
-                );
-            }
-        }
+        let u = self.basis_times::<J, L>(&bl);
         if *act == 0 && u.iter().all(|&uk| L::nonzero(L::min0(uk)) == 0) {
             return;
         }
@@ -908,39 +914,6 @@ impl Joint {
             nonzero += L::nonzero(next);
         }
         *act = (nonzero > 0) as u8;
-    }
-
-    /// [`Joint::dual_row`] on AVX registers when the CPU has AVX2, else on plain arrays (the
-    /// same operations in the same order, so the same bits).
-    fn dual_row_simd<const J: usize>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2, the one feature the copy is compiled for.
-            return unsafe { self.dual_row_avx2::<J>(row, bar, step) };
-        }
-        self.dual_row::<J, lane::Portable>(row, bar, step)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn dual_row_avx2<const J: usize>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
-        self.dual_row::<J, lane::Avx>(row, bar, step)
-    }
-
-    /// [`Joint::primal_row`] on AVX registers when the CPU has AVX2 (as [`Joint::dual_row_simd`]).
-    fn primal_row_simd<const J: usize>(&self, row: PrimalRow<'_>, mat: &[Lane], tau: f32) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2, the one feature the copy is compiled for.
-            return unsafe { self.primal_row_avx2::<J>(row, mat, tau) };
-        }
-        self.primal_row::<J, lane::Portable>(row, mat, tau)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn primal_row_avx2<const J: usize>(&self, row: PrimalRow<'_>, mat: &[Lane], tau: f32) {
-        self.primal_row::<J, lane::Avx>(row, mat, tau)
     }
 
     /// The primal update of one row given div q there: α⁺ = prox_{τf}(x + τ(div q − βBᵀr)),
@@ -1154,7 +1127,12 @@ impl Joint {
         }
         let mut bv = vec![0.0f32; w * h * nb];
         for (ap, u) in alpha.chunks_exact(j).zip(bv.chunks_exact_mut(nb)) {
-            self.basis_times(ap, u);
+            with_basis_len!(j, J => {
+                let blocks = self.basis_times::<J, Portable>(&Portable::load::<J>(ap));
+                for (ub, b) in u.chunks_exact_mut(LANES).zip(blocks) {
+                    ub.copy_from_slice(&b);
+                }
+            });
         }
         (gx, gy, bv)
     }
@@ -1392,7 +1370,8 @@ struct DualRow<'a> {
     weight: &'a [f32],
 }
 
-/// What one row's dual update reads besides its duals: ∇ᾱ there, σ and λ.
+/// What one row's dual update reads besides its duals: ∇ᾱ there, σ, λ and the flush
+/// threshold of r.
 #[derive(Clone, Copy)]
 struct DualStep<'a> {
     gx: &'a [f32],
@@ -1430,6 +1409,36 @@ fn data_residual(y: f32, fit: f64, cap: f32) -> f64 {
     match fit >= cap as f64 {
         true => 0.0,
         false => y as f64 - fit,
+    }
+}
+
+/// One row's dual update ([`Joint::dual_row`]) as a kernel over lanes, for `lane::dispatch`.
+struct DualKernel<'a, const J: usize> {
+    joint: &'a Joint,
+    row: DualRow<'a>,
+    bar: &'a [f32],
+    step: DualStep<'a>,
+}
+
+impl<const J: usize> LaneKernel for DualKernel<'_, J> {
+    #[inline(always)]
+    fn run<L: Lanes>(self) {
+        self.joint.dual_row::<J, L>(self.row, self.bar, self.step)
+    }
+}
+
+/// One row's primal update ([`Joint::primal_row`]) as a kernel over lanes.
+struct PrimalKernel<'a, const J: usize> {
+    joint: &'a Joint,
+    row: PrimalRow<'a>,
+    mat: &'a [Lane],
+    tau: f32,
+}
+
+impl<const J: usize> LaneKernel for PrimalKernel<'_, J> {
+    #[inline(always)]
+    fn run<L: Lanes>(self) {
+        self.joint.primal_row::<J, L>(self.row, self.mat, self.tau)
     }
 }
 
@@ -1996,9 +2005,6 @@ mod tests {
         }
     }
 
-    /// With η = 0 a constant α field fitting y = Aα exactly has objective 0, the least any
-    /// field can have, and no other field reaches it (zero TV means constant, and the patterns
-    /// vary enough across the frame that one constant fits): the exact minimiser.
     #[test]
     fn flushing_the_dual_keeps_the_iterate_and_idles_the_constraint() {
         // The test's scene at 32² with a strong second coefficient in its block rows, so
@@ -2039,6 +2045,9 @@ mod tests {
         assert!(rel < 1e-4, "α moved by {rel:.2e}");
     }
 
+    /// With η = 0 a constant α field fitting y = Aα exactly has objective 0, the least any
+    /// field can have, and no other field reaches it (zero TV means constant, and the patterns
+    /// vary enough across the frame that one constant fits): the exact minimiser.
     #[test]
     fn a_cube_in_the_range_is_recovered() {
         // The relaxed iteration is slower in this test's tail (1.8e-4 after 2000 iterations,

@@ -67,6 +67,29 @@ pub(super) trait Lanes {
     }
 }
 
+/// A per-pixel kernel written once over [`Lanes`]: `run` is instantiated for each.
+pub(super) trait LaneKernel {
+    fn run<L: Lanes>(self);
+}
+
+/// Run `k` on AVX registers when the CPU has AVX2, else on plain arrays (the same operations in
+/// the same order, so the same bits): the one place the kernels pick their lanes.
+pub(super) fn dispatch<K: LaneKernel>(k: K) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, the one feature `on_avx` is compiled for.
+        return unsafe { on_avx(k) };
+    }
+    k.run::<Portable>()
+}
+
+/// `k` on [`Avx`], compiled with AVX2 enabled so the lane operations inline as AVX code.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn on_avx<K: LaneKernel>(k: K) {
+    k.run::<Avx>()
+}
+
 /// [`Lanes`] on plain arrays: any CPU.
 pub(super) struct Portable;
 
@@ -126,7 +149,7 @@ impl Lanes for Portable {
 }
 
 /// [`Lanes`] on AVX registers; only for code compiled with AVX2 enabled and run on a CPU that
-/// has it (the kernels' `*_avx2` copies, picked at run time).
+/// has it (`on_avx`, picked at run time by `dispatch`).
 #[cfg(target_arch = "x86_64")]
 pub(super) struct Avx;
 
@@ -308,12 +331,15 @@ mod tests {
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
-        #[target_feature(enable = "avx2")]
-        unsafe fn on_avx() -> Vec<Lane> {
-            ops::<Avx>()
+        struct Ops<'a>(&'a mut Vec<Lane>);
+        impl LaneKernel for Ops<'_> {
+            fn run<L: Lanes>(self) {
+                *self.0 = ops::<L>();
+            }
         }
+        let mut avx = Vec::new();
         // SAFETY: the CPU has AVX2.
-        let avx = unsafe { on_avx() };
+        unsafe { on_avx(Ops(&mut avx)) };
         let bits =
             |v: &Vec<Lane>| -> Vec<u32> { v.iter().flatten().map(|x| x.to_bits()).collect() };
         assert_eq!(bits(&avx), bits(&ops::<Portable>()));
