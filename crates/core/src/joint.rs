@@ -674,71 +674,163 @@ impl Joint {
     /// γ = 1). Returns the objective at the α the iteration started from (computed in the
     /// dual pass, which reads α's rows anyway).
     pub fn step(&self, st: &mut JointState) -> f64 {
-        let before = self.dual_step(st, true);
-        self.primal_step(st);
-        before
+        self.sweep(st, true, STRIP_ROWS)
     }
 
     /// One iteration without the objective (the same iterate as [`Joint::step`]).
     fn step_untraced(&self, st: &mut JointState) {
-        self.dual_step(st, false);
-        self.primal_step(st);
+        self.sweep(st, false, STRIP_ROWS);
     }
 
-    /// q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel (joint over J and both directions);
-    /// r ← min(r + σβBᾱ, 0), both relaxed by γ (t + (γ − 1)(t − old)), r skipped where it is
-    /// 0 and a bound proves βBᾱ ≥ 0. With `cost`, returns the objective at α (before the
-    /// step), else 0.
-    fn dual_step(&self, st: &mut JointState, cost: bool) -> f64 {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
-        let (bar, alpha, sigma, lambda) = (&st.bar, &st.alpha, st.sigma, st.lambda);
-        let flush = st.flush;
-        let tvw = &st.tvw;
-        let data = DataTerm {
-            y: &st.y,
-            om: &st.omega,
-            cap: &st.cap,
-            tvw,
+    /// One iteration in one pass over strips of `rows` rows (in parallel): row by row, the
+    /// dual update (q ← P_{‖·‖≤λ}(q + σ∇ᾱ), r ← min(r + σβBᾱ, 0), both relaxed) and then the
+    /// row's primal update, while its q and r (and q of the row above) are still in cache. A
+    /// strip's first row needs q of the strip above, so its primal update waits until all
+    /// strips are done; until then its ᾱ and α are the old ones, which the strip above reads.
+    /// The same bits for any `rows` (1: every dual update, then every primal one). With `cost`,
+    /// returns the objective at α before the step.
+    fn sweep(&self, st: &mut JointState, cost: bool, rows: usize) -> f64 {
+        let wj = self.w * self.j;
+        let tables = SweepTables {
+            data: DataTerm {
+                y: &st.y,
+                om: &st.omega,
+                cap: &st.cap,
+                tvw: &st.tvw,
+            },
+            mat: &st.mat,
+            m: &st.m,
+            tck: &st.tck,
+            step: [st.sigma, st.lambda, st.flush, st.tau],
         };
-        st.qx
-            .par_chunks_mut(w * j)
-            .zip(st.qy.par_chunks_mut(w * j))
-            .zip(st.r.par_chunks_mut(w * nb).zip(st.active.par_chunks_mut(w)))
-            .zip(st.row_sums.par_iter_mut())
+        let halo = (
+            first_rows(&st.bar, wj, rows),
+            match cost {
+                true => first_rows(&st.alpha, wj, rows),
+                false => Vec::new(),
+            },
+        );
+        let fields = StripFields {
+            alpha: &mut st.alpha,
+            bar: &mut st.bar,
+            qx: &mut st.qx,
+            qy: &mut st.qy,
+            r: &mut st.r,
+            active: &mut st.active,
+            sums: &mut st.row_sums,
+        };
+        let strips = Strip::split(fields, (self.w, self.j, self.nbp), rows, &halo);
+        strips.into_par_iter().for_each_init(
+            || (vec![0.0f32; wj], vec![0.0f32; wj]),
+            |scratch, strip| self.strip_pass(strip, &tables, cost, scratch),
+        );
+        let (qx, qy, act, r, tau) = (&st.qx, &st.qy, &st.active, &st.r, st.tau);
+        st.alpha
+            .par_chunks_mut(rows * wj)
+            .zip(st.bar.par_chunks_mut(rows * wj))
             .enumerate()
             .for_each_init(
-                || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
-                |(gx, gy), (yy, (((qx, qy), (rrow, act)), sum))| {
-                    let tvw = &tvw[yy * w..(yy + 1) * w];
-                    *sum = match cost {
-                        true => self.row_cost(alpha, &data, lambda, yy, (gx, gy)),
-                        false => 0.0,
-                    };
-                    row_gradients(bar, w, h, j, yy, gx, gy);
-                    let bar_row = &bar[yy * w * j..(yy + 1) * w * j];
-                    let row = DualRow {
-                        qx,
-                        qy,
-                        r: rrow,
-                        active: act,
-                        weight: tvw,
-                    };
-                    let step = DualStep {
-                        gx,
-                        gy,
-                        sigma,
-                        lambda,
-                        flush,
-                    };
-                    with_basis_len!(j, J => lane::dispatch(DualKernel::<J> {
-                        joint: self,
-                        row,
-                        bar: bar_row,
-                        step,
-                    }));
+                || vec![0.0f32; wj],
+                |div, (s, (alpha, bar))| {
+                    let yy = s * rows;
+                    row_divergence(
+                        &qx[yy * wj..],
+                        &qy[yy * wj..],
+                        row_above(qy, wj, yy),
+                        self.j,
+                        div,
+                    );
+                    let duals = (&act[yy * self.w..], &r[yy * self.w * self.nbp..]);
+                    self.primal_at(
+                        yy,
+                        (&mut alpha[..wj], &mut bar[..wj]),
+                        div,
+                        duals,
+                        &tables,
+                        tau,
+                    );
                 },
             );
         st.row_sums.iter().sum()
+    }
+
+    /// Phase one of [`Joint::sweep`] on one strip: each row's dual update (and its share of
+    /// the objective) and the primal update of every row but the first.
+    fn strip_pass(
+        &self,
+        s: Strip<'_>,
+        t: &SweepTables<'_>,
+        cost: bool,
+        (ga, gb): &mut (Vec<f32>, Vec<f32>),
+    ) {
+        let (w, j, nb, wj) = (self.w, self.j, self.nbp, self.w * self.j);
+        let [sigma, lambda, flush, tau] = t.step;
+        for k in 0..s.sums.len() {
+            let yy = s.y0 + k;
+            if cost {
+                let next = s.alpha.get((k + 1) * wj..(k + 2) * wj).or(s.next_alpha);
+                s.sums[k] = self.row_cost(
+                    (&s.alpha[k * wj..(k + 1) * wj], next),
+                    &t.data,
+                    lambda,
+                    yy,
+                    (ga, gb),
+                );
+            }
+            let next = s.bar.get((k + 1) * wj..(k + 2) * wj).or(s.next_bar);
+            let bar = &s.bar[k * wj..(k + 1) * wj];
+            row_gradients((bar, next), j, ga, gb);
+            let row = DualRow {
+                qx: &mut s.qx[k * wj..(k + 1) * wj],
+                qy: &mut s.qy[k * wj..(k + 1) * wj],
+                r: &mut s.r[k * w * nb..(k + 1) * w * nb],
+                active: &mut s.active[k * w..(k + 1) * w],
+                weight: &t.data.tvw[yy * w..(yy + 1) * w],
+            };
+            let step = DualStep {
+                gx: ga,
+                gy: gb,
+                sigma,
+                lambda,
+                flush,
+            };
+            with_basis_len!(j, J => lane::dispatch(DualKernel::<J> { joint: self, row, bar, step }));
+            if k > 0 {
+                let up = Some(&s.qy[(k - 1) * wj..k * wj]);
+                row_divergence(&s.qx[k * wj..], &s.qy[k * wj..], up, j, ga);
+                let duals = (&s.active[k * w..], &s.r[k * w * nb..]);
+                let rows = (
+                    &mut s.alpha[k * wj..(k + 1) * wj],
+                    &mut s.bar[k * wj..(k + 1) * wj],
+                );
+                self.primal_at(yy, rows, ga, duals, t, tau);
+            }
+        }
+    }
+
+    /// The primal update of row `yy` (α and ᾱ there, written) from its div q and the flags
+    /// and r from the row's start on.
+    fn primal_at(
+        &self,
+        yy: usize,
+        (alpha, bar): (&mut [f32], &mut [f32]),
+        div: &[f32],
+        (active, r): (&[u8], &[f32]),
+        t: &SweepTables<'_>,
+        tau: f32,
+    ) {
+        let (w, j, nb) = (self.w, self.j, self.nbp);
+        let px = yy * w..(yy + 1) * w;
+        let row = PrimalRow {
+            alpha,
+            bar,
+            div,
+            active: &active[..w],
+            r: &r[..w * nb],
+            m: &t.m[px.start * j..px.end * j],
+            tck: &t.tck[px],
+        };
+        with_basis_len!(j, J => lane::dispatch(PrimalKernel::<J> { joint: self, row, mat: t.mat, tau }));
     }
 
     /// βBα on the padded bands, a block of `LANES` bands at a time (the columns summed in
@@ -767,20 +859,20 @@ impl Joint {
     }
 
     /// Row `yy`'s share of the objective Σ ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖, in f64 in pixel
-    /// order; (gx, gy) is scratch for the row's ∇α.
+    /// order, from α's row and the row below; (gx, gy) is scratch for the row's ∇α.
     fn row_cost(
         &self,
-        alpha: &[f32],
+        (alpha, next): (&[f32], Option<&[f32]>),
         data: &DataTerm<'_>,
         lambda: f32,
         yy: usize,
         (gx, gy): (&mut [f32], &mut [f32]),
     ) -> f64 {
-        let (w, h, j) = (self.w, self.h, self.j);
-        row_gradients(alpha, w, h, j, yy, gx, gy);
+        let (w, j) = (self.w, self.j);
+        row_gradients((alpha, next), j, gx, gy);
         let px = yy * w..(yy + 1) * w;
         let row = CostRow {
-            alpha: &alpha[px.start * j..px.end * j],
+            alpha,
             a: &self.a[px.start * j..px.end * j],
             y: &data.y[px.clone()],
             om: &data.om[px.clone()],
@@ -817,39 +909,6 @@ impl Joint {
             sum += 0.5 * om as f64 * r * r + 0.5 * quad + (lambda * wp) as f64 * g2.sqrt();
         }
         sum
-    }
-
-    /// α⁺ = prox_{τf}(x − τ(∇ᵀq + βBᵀr)) from the relaxed point x; ᾱ = 2α⁺ − x.
-    fn primal_step(&self, st: &mut JointState) {
-        let (w, j, nb) = (self.w, self.j, self.nbp);
-        let (qx, qy, r, act, tau) = (&st.qx, &st.qy, &st.r, &st.active, st.tau);
-        let (mat, m, tck) = (&st.mat, &st.m, &st.tck);
-        st.alpha
-            .par_chunks_mut(w * j)
-            .zip(st.bar.par_chunks_mut(w * j))
-            .enumerate()
-            .for_each_init(
-                || vec![0.0f32; w * j],
-                |div, (yy, (arow, brow))| {
-                    row_divergence(qx, qy, w, j, yy, div);
-                    let px = yy * w..(yy + 1) * w;
-                    let row = PrimalRow {
-                        alpha: arow,
-                        bar: brow,
-                        div,
-                        active: &act[px.clone()],
-                        r: &r[px.start * nb..px.end * nb],
-                        m: &m[px.start * j..px.end * j],
-                        tck: &tck[px],
-                    };
-                    with_basis_len!(j, J => lane::dispatch(PrimalKernel::<J> {
-                        joint: self,
-                        row,
-                        mat,
-                        tau,
-                    }));
-                },
-            );
     }
 
     /// The dual update of one row given ∇ᾱ there (gx, gy): q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel
@@ -950,7 +1009,7 @@ impl Joint {
 
     /// ½Σω(y − aᵀα)² + ½Σ αᵀη'Qα + λΣ‖∇α‖ at the current α (row sums in f64, fixed order).
     pub fn objective(&self, st: &mut JointState) -> f64 {
-        let (w, j) = (self.w, self.j);
+        let wj = self.w * self.j;
         let (alpha, lambda) = (&st.alpha, st.lambda);
         let data = DataTerm {
             y: &st.y,
@@ -959,8 +1018,10 @@ impl Joint {
             tvw: &st.tvw,
         };
         st.row_sums.par_iter_mut().enumerate().for_each_init(
-            || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
-            |(gx, gy), (yy, sum)| *sum = self.row_cost(alpha, &data, lambda, yy, (gx, gy)),
+            || (vec![0.0f32; wj], vec![0.0f32; wj]),
+            |(gx, gy), (yy, sum)| {
+                *sum = self.row_cost(row_pair(alpha, wj, yy), &data, lambda, yy, (gx, gy))
+            },
         );
         st.row_sums.iter().sum()
     }
@@ -1036,7 +1097,7 @@ impl Joint {
         st.tvw.par_chunks_mut(w).enumerate().for_each_init(
             || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
             |(gx, gy), (yy, row)| {
-                row_gradients(alpha, w, h, j, yy, gx, gy);
+                row_gradients(row_pair(alpha, w * j, yy), j, gx, gy);
                 let grads = gx.chunks_exact(j).zip(gy.chunks_exact(j));
                 for (g, (x, y)) in row.iter_mut().zip(grads) {
                     *g = x.iter().chain(y).map(|v| v * v).sum::<f32>().sqrt();
@@ -1123,7 +1184,7 @@ impl Joint {
         let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
         let (mut gx, mut gy) = (vec![0.0f32; w * h * j], vec![0.0f32; w * h * j]);
         for (yy, (rx, ry)) in gx.chunks_mut(w * j).zip(gy.chunks_mut(w * j)).enumerate() {
-            row_gradients(alpha, w, h, j, yy, rx, ry);
+            row_gradients(row_pair(alpha, w * j, yy), j, rx, ry);
         }
         let mut bv = vec![0.0f32; w * h * nb];
         for (ap, u) in alpha.chunks_exact(j).zip(bv.chunks_exact_mut(nb)) {
@@ -1152,7 +1213,9 @@ impl Joint {
             let (gx, gy, bv) = self.apply_k(&v);
             let mut out = vec![0.0f32; n * j];
             for (yy, orow) in out.chunks_mut(w * j).enumerate() {
-                row_divergence(&gx, &gy, w, j, yy, &mut div);
+                let at = yy * w * j..;
+                let up = row_above(&gy, w * j, yy);
+                row_divergence(&gx[at.clone()], &gy[at], up, j, &mut div);
                 let pixels = orow.chunks_exact_mut(j).zip(div.chunks_exact(j));
                 for (x, (o, d)) in pixels.enumerate() {
                     let p = yy * w + x;
@@ -1454,6 +1517,90 @@ struct PrimalRow<'a> {
     tck: &'a [[f32; 4]],
 }
 
+/// Rows per strip of [`Joint::sweep`]: a strip's rows of q and r (about 100 kB a row at 768
+/// pixels) are still in cache when the row's primal update reads them.
+const STRIP_ROWS: usize = 16;
+
+/// The read-only tables of one [`Joint::sweep`]: the data term, the proximal tables and the
+/// steps [σ, λ, flush threshold, τ].
+struct SweepTables<'a> {
+    data: DataTerm<'a>,
+    mat: &'a [Lane],
+    m: &'a [f32],
+    tck: &'a [[f32; 4]],
+    step: [f32; 4],
+}
+
+/// One strip of rows of the iterate and the duals, starting at row `y0`, with the first rows
+/// of ᾱ and α below it (as they were before the sweep; `None` for the last strip).
+struct Strip<'a> {
+    y0: usize,
+    alpha: &'a mut [f32],
+    bar: &'a mut [f32],
+    qx: &'a mut [f32],
+    qy: &'a mut [f32],
+    r: &'a mut [f32],
+    active: &'a mut [u8],
+    sums: &'a mut [f64],
+    next_bar: Option<&'a [f32]>,
+    next_alpha: Option<&'a [f32]>,
+}
+
+/// The state's fields a sweep cuts into strips.
+struct StripFields<'a> {
+    alpha: &'a mut [f32],
+    bar: &'a mut [f32],
+    qx: &'a mut [f32],
+    qy: &'a mut [f32],
+    r: &'a mut [f32],
+    active: &'a mut [u8],
+    sums: &'a mut [f64],
+}
+
+impl<'a> Strip<'a> {
+    /// The strips of `rows` rows of a `w`-pixel-wide state, J and `nb` values a pixel; `halo`
+    /// holds the first rows of ᾱ and α of each strip (α's empty when the sweep needs no cost).
+    fn split(
+        f: StripFields<'a>,
+        (w, j, nb): (usize, usize, usize),
+        rows: usize,
+        halo: &'a (Vec<f32>, Vec<f32>),
+    ) -> Vec<Strip<'a>> {
+        let wj = w * j;
+        let next = |v: &'a [f32], s: usize| v.get((s + 1) * wj..(s + 2) * wj);
+        let cut = |v: &'a mut [f32], per: usize| v.chunks_mut(rows * per);
+        cut(f.alpha, wj)
+            .zip(cut(f.bar, wj))
+            .zip(cut(f.qx, wj).zip(cut(f.qy, wj)))
+            .zip(cut(f.r, w * nb).zip(f.active.chunks_mut(rows * w)))
+            .zip(f.sums.chunks_mut(rows))
+            .enumerate()
+            .map(
+                |(s, ((((alpha, bar), (qx, qy)), (r, active)), sums))| Strip {
+                    y0: s * rows,
+                    alpha,
+                    bar,
+                    qx,
+                    qy,
+                    r,
+                    active,
+                    sums,
+                    next_bar: next(&halo.0, s),
+                    next_alpha: next(&halo.1, s),
+                },
+            )
+            .collect()
+    }
+}
+
+/// The first row of each strip of `rows` rows of a pixel-major field, `wj` values a row.
+fn first_rows(u: &[f32], wj: usize, rows: usize) -> Vec<f32> {
+    u.chunks(rows * wj)
+        .flat_map(|s| &s[..wj])
+        .copied()
+        .collect()
+}
+
 /// The factor that brings a vector of squared norm `n2` into the ball of radius `r`: 1 inside
 /// it, r/√n2 outside (0 for r = 0). The TV dual's projection, in the step and the reweighting.
 #[inline(always)]
@@ -1534,47 +1681,52 @@ fn ridge_excess(g: &[f32], w: usize, h: usize) -> Vec<f32> {
     out
 }
 
-/// Forward differences of row `yy` of a pixel-major field (J per pixel), zero across the last
-/// column and row (Neumann boundaries, as in `tv.rs`).
-fn row_gradients(
-    u: &[f32],
-    w: usize,
-    h: usize,
-    j: usize,
-    yy: usize,
-    gx: &mut [f32],
-    gy: &mut [f32],
-) {
-    let row = &u[yy * w * j..(yy + 1) * w * j];
-    let inner = (w - 1) * j;
+/// A row of a pixel-major field (`wj` values a row) and the row below it, if there is one.
+fn row_pair(u: &[f32], wj: usize, yy: usize) -> (&[f32], Option<&[f32]>) {
+    (
+        &u[yy * wj..(yy + 1) * wj],
+        u.get((yy + 1) * wj..(yy + 2) * wj),
+    )
+}
+
+/// The row above row `yy` of a pixel-major field, if there is one.
+fn row_above(u: &[f32], wj: usize, yy: usize) -> Option<&[f32]> {
+    (yy > 0).then(|| &u[(yy - 1) * wj..yy * wj])
+}
+
+/// Forward differences of a row of a pixel-major field (J per pixel) given the row below
+/// (`None` for the last row), zero across the last column and row (Neumann boundaries, as in
+/// `tv.rs`).
+fn row_gradients((row, next): (&[f32], Option<&[f32]>), j: usize, gx: &mut [f32], gy: &mut [f32]) {
+    let inner = row.len() - j;
     for (i, g) in gx[..inner].iter_mut().enumerate() {
         *g = row[i + j] - row[i];
     }
     gx[inner..].fill(0.0);
-    if yy + 1 < h {
-        let next = &u[(yy + 1) * w * j..(yy + 2) * w * j];
-        for ((g, a), b) in gy.iter_mut().zip(row).zip(next) {
-            *g = b - a;
+    match next {
+        Some(next) => {
+            for ((g, a), b) in gy.iter_mut().zip(row).zip(next) {
+                *g = b - a;
+            }
         }
-    } else {
-        gy.fill(0.0);
+        None => gy.fill(0.0),
     }
 }
 
-/// div q = −∇ᵀq on row `yy` for `row_gradients`' differences; qx must be zero in the last
-/// column and qy in the last row (as every gradient there is).
-fn row_divergence(qx: &[f32], qy: &[f32], w: usize, j: usize, yy: usize, div: &mut [f32]) {
-    let start = yy * w * j;
-    let (qxr, qyr) = (&qx[start..start + w * j], &qy[start..start + w * j]);
+/// div q = −∇ᵀq on a row for `row_gradients`' differences, from the row's qx and qy (the first
+/// `div.len()` values of each) and qy of the row above (`None` for the first row); qx must be
+/// zero in the last column and qy in the last row (as every gradient there is).
+fn row_divergence(qx: &[f32], qy: &[f32], up: Option<&[f32]>, j: usize, div: &mut [f32]) {
+    let wj = div.len();
+    let (qxr, qyr) = (&qx[..wj], &qy[..wj]);
     // The first pixel has no left neighbour and the first row none above: 0 there.
     div[..j].copy_from_slice(&qxr[..j]);
     for ((d, q), left) in div[j..].iter_mut().zip(&qxr[j..]).zip(qxr) {
         *d = q - left;
     }
-    match yy {
-        0 => div.iter_mut().zip(qyr).for_each(|(d, q)| *d += q),
-        _ => {
-            let up = &qy[start - w * j..start];
+    match up {
+        None => div.iter_mut().zip(qyr).for_each(|(d, q)| *d += q),
+        Some(up) => {
             for ((d, q), u) in div.iter_mut().zip(qyr).zip(up) {
                 *d = *d + q - u;
             }
@@ -1771,6 +1923,37 @@ mod tests {
         assert!(est <= j.operator_norm().powi(2) * (1.0 + 1e-5), "{est}");
         // The bound is not loose by more than the gradient's boundary effect.
         assert!(est > 0.8 * j.operator_norm().powi(2), "{est}");
+    }
+
+    /// The fused sweep gives the same bits for strips of 1 row (every dual update, then every
+    /// primal one: the two passes), 3 and 16 rows, one strip and more rows than the frame has,
+    /// on a 37-row frame with the constraint's dual live and flushed (a strong second
+    /// coefficient in the block rows makes Bα < 0 at the red end there).
+    #[test]
+    fn the_sweep_gives_the_same_bits_for_any_strip_height() {
+        let j = solver(37, 1.0, JointConfig::default());
+        let mut t = truth(37, 37);
+        t.plane_mut(1)[9 * 37..18 * 37].fill(1.6);
+        let y = frame_of(&j, &t);
+        let run = |rows: usize| {
+            let mut st = j.start(&y, &flat_seed(&t), None).unwrap();
+            st.flush = 0.01 * st.lambda;
+            let costs: Vec<f64> = (0..6).map(|_| j.sweep(&mut st, true, rows)).collect();
+            let fields = [&st.alpha, &st.bar, &st.qx, &st.qy, &st.r];
+            let bits: Vec<u32> = fields
+                .iter()
+                .flat_map(|v| v.iter().map(|x| x.to_bits()))
+                .collect();
+            (costs, bits, st.active.clone())
+        };
+        let two_passes = run(1);
+        assert!(
+            two_passes.2.contains(&1),
+            "the constraint's dual never became live"
+        );
+        for rows in [3, 16, 37, 64] {
+            assert!(run(rows) == two_passes, "strips of {rows} rows");
+        }
     }
 
     #[test]
