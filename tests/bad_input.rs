@@ -45,22 +45,24 @@ const SMALL: &str = "[scene]\nsize = [64, 64]\n";
 
 #[test]
 fn missing_spectrum_file() {
-    let d = tmpdir("bad-missing");
+    let scratch = tmpdir("bad-missing");
+    let d = scratch.path();
     let toml = format!("{SMALL}[rig.wheel]\nfilters = [\"wheel/red\", \"wheel/nope\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n");
-    let (ok, err) = simulate(&d, &toml, None);
+    let (ok, err) = simulate(d, &toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.wheel.filters[1]", "nope.csv"]);
 }
 
 #[test]
 fn malformed_csv() {
-    let d = tmpdir("bad-malformed");
-    let s = spectra_copy(&d);
+    let scratch = tmpdir("bad-malformed");
+    let d = scratch.path();
+    let s = spectra_copy(d);
     let f = s.join("wheel/green.csv");
     let text = std::fs::read_to_string(&f)
         .unwrap()
         .replacen("\n5", "\n5x", 1);
     std::fs::write(&f, text).unwrap();
-    let (ok, err) = simulate(&d, SMALL, Some(&s));
+    let (ok, err) = simulate(d, SMALL, Some(&s));
     assert_one_line_error(
         ok,
         &err,
@@ -70,8 +72,9 @@ fn malformed_csv() {
 
 #[test]
 fn nan_in_a_curve() {
-    let d = tmpdir("bad-nan");
-    let s = spectra_copy(&d);
+    let scratch = tmpdir("bad-nan");
+    let d = scratch.path();
+    let s = spectra_copy(d);
     let f = s.join("camera/mono_qe.csv");
     let mut lines: Vec<String> = std::fs::read_to_string(&f)
         .unwrap()
@@ -82,7 +85,7 @@ fn nan_in_a_curve() {
     let wl = lines[last].split(',').next().unwrap().to_string();
     lines[last] = format!("{wl},NaN");
     std::fs::write(&f, lines.join("\n")).unwrap();
-    let (ok, err) = simulate(&d, SMALL, Some(&s));
+    let (ok, err) = simulate(d, SMALL, Some(&s));
     assert_one_line_error(ok, &err, &["mono_qe.csv:", "not finite", "rig.camera.qe"]);
 }
 
@@ -90,8 +93,9 @@ fn nan_in_a_curve() {
 fn a_segment_that_passes_no_light_cannot_form_a_pattern() {
     // An infrared filter (750–800 nm) on a 400–700 nm rig: its pattern through the 4f filter
     // would be dark, so the experiment is refused by the filter's key.
-    let d = tmpdir("bad-dark-segment");
-    let s = spectra_copy(&d);
+    let scratch = tmpdir("bad-dark-segment");
+    let d = scratch.path();
+    let s = spectra_copy(d);
     std::fs::write(
         s.join("wheel/ir.csv"),
         "# test: an infrared long-pass\nwavelength_nm,value\n750,1\n800,1\n",
@@ -100,7 +104,7 @@ fn a_segment_that_passes_no_light_cannot_form_a_pattern() {
     let toml = format!(
         "{SMALL}[rig.wheel]\nfilters = [\"wheel/ir\", \"wheel/green\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n[rig.dmd]\n[rig.fourier_filter]\n"
     );
-    let (ok, err) = simulate(&d, &toml, Some(&s));
+    let (ok, err) = simulate(d, &toml, Some(&s));
     assert_one_line_error(
         ok,
         &err,
@@ -110,14 +114,16 @@ fn a_segment_that_passes_no_light_cannot_form_a_pattern() {
 
 #[test]
 fn negative_wavelength_step() {
-    let d = tmpdir("bad-step");
-    let (ok, err) = simulate(&d, "[scene]\nwavelengths_nm = [400, 700, -10]\n", None);
+    let scratch = tmpdir("bad-step");
+    let d = scratch.path();
+    let (ok, err) = simulate(d, "[scene]\nwavelengths_nm = [400, 700, -10]\n", None);
     assert_one_line_error(ok, &err, &["exp.toml", "scene.wavelengths_nm[2]", "-10"]);
 }
 
 #[test]
 fn exr_with_the_wrong_channel_count() {
-    let d = tmpdir("bad-exr");
+    let scratch = tmpdir("bad-exr");
+    let d = scratch.path();
     let cube = specmux_core::Cube::zeros(64, 64, 5);
     let names: Vec<String> = (0..5)
         .map(|k| specmux_io::exr::band_name(400.0 + 10.0 * k as f64))
@@ -125,20 +131,22 @@ fn exr_with_the_wrong_channel_count() {
     specmux_io::exr::write(&d.join("five.exr"), &cube, &names).unwrap();
     // The grid written in the experiment (not taken from the file's channel names) disagrees.
     let toml = format!("{SMALL}source = \"exr:five.exr\"\nquantity = \"radiance\"\nwavelengths_nm = [400, 700, 10]\n");
-    let (ok, err) = simulate(&d, &toml, None);
+    let (ok, err) = simulate(d, &toml, None);
     assert_one_line_error(ok, &err, &["five.exr", "5 channels", "31 bands"]);
 }
 
 #[test]
 fn unknown_key() {
-    let d = tmpdir("bad-key");
-    let (ok, err) = simulate(&d, "[rig.wheel]\nfilterz = []\n", None);
+    let scratch = tmpdir("bad-key");
+    let d = scratch.path();
+    let (ok, err) = simulate(d, "[rig.wheel]\nfilterz = []\n", None);
     assert_one_line_error(ok, &err, &["exp.toml:2", "filterz"]);
 }
 
 #[test]
 fn out_of_range_values_in_the_light_path_sections() {
-    let d = tmpdir("bad-ranges");
+    let scratch = tmpdir("bad-ranges");
+    let d = scratch.path();
     for (toml, key, value) in [
         ("[rig.sensor]\nbits = 40\n", "rig.sensor.bits", "40"),
         (
@@ -184,30 +192,33 @@ fn out_of_range_values_in_the_light_path_sections() {
             "[[1.0, 0.0]]",
         ),
     ] {
-        let (ok, err) = simulate(&d, toml, None);
+        let (ok, err) = simulate(d, toml, None);
         assert_one_line_error(ok, &err, &["exp.toml", key, value]);
     }
 }
 
 #[test]
 fn a_timing_that_needs_a_faster_dmd_is_refused() {
-    let d = tmpdir("bad-dmdrate");
+    let scratch = tmpdir("bad-dmdrate");
+    let d = scratch.path();
     let toml = "[rig.timing.wheel]\nrate_hz = 10000\n";
-    let (ok, err) = simulate(&d, toml, None);
+    let (ok, err) = simulate(d, toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.timing"]);
 }
 
 #[test]
 fn sensor_and_timing_must_agree_on_the_exposure() {
-    let d = tmpdir("bad-exposure");
+    let scratch = tmpdir("bad-exposure");
+    let d = scratch.path();
     let toml = "[rig.timing.camera]\nexposure_s = 0.02\n[rig.sensor]\n";
-    let (ok, err) = simulate(&d, toml, None);
+    let (ok, err) = simulate(d, toml, None);
     assert_one_line_error(ok, &err, &["exp.toml", "rig.sensor.exposure_s", "0.02"]);
 }
 
 #[test]
 fn an_iteration_count_beside_the_default_auto_method_is_refused() {
-    let d = tmpdir("bad-auto-iterations");
+    let scratch = tmpdir("bad-auto-iterations");
+    let d = scratch.path();
     for (toml, key) in [
         (
             "[reconstruct.gap]\niterations = 50\n",
@@ -218,12 +229,12 @@ fn an_iteration_count_beside_the_default_auto_method_is_refused() {
             "reconstruct.joint.iterations",
         ),
     ] {
-        let (ok, err) = simulate(&d, &format!("{SMALL}{toml}"), None);
+        let (ok, err) = simulate(d, &format!("{SMALL}{toml}"), None);
         assert_one_line_error(ok, &err, &["exp.toml", key, "\"auto\" (the default)"]);
     }
     // Naming the method makes the count apply.
     let toml = format!("{SMALL}[reconstruct.gap]\nmethod = \"gap\"\niterations = 5\n");
-    let (ok, err) = simulate(&d, &toml, None);
+    let (ok, err) = simulate(d, &toml, None);
     assert!(ok, "{err}");
 }
 
@@ -231,7 +242,8 @@ fn an_iteration_count_beside_the_default_auto_method_is_refused() {
 /// wavelet's divisibility rule (0 divides by 16); so is the photon-transfer frames' side.
 #[test]
 fn a_size_outside_the_scene_range_is_refused() {
-    let d = tmpdir("bad-size");
+    let scratch = tmpdir("bad-size");
+    let d = scratch.path();
     // `ptc --size 100000` used to abort allocating its frames.
     for (cmd, n) in [
         ("demo", "0"),
@@ -255,8 +267,9 @@ fn a_size_outside_the_scene_range_is_refused() {
 #[cfg(not(feature = "gpu"))]
 #[test]
 fn a_gpu_device_without_the_backend_is_refused() {
-    let d = tmpdir("bad-gpu");
-    let (ok, err) = simulate(&d, &format!("{SMALL}[compute]\ndevice = \"gpu\"\n"), None);
+    let scratch = tmpdir("bad-gpu");
+    let d = scratch.path();
+    let (ok, err) = simulate(d, &format!("{SMALL}[compute]\ndevice = \"gpu\"\n"), None);
     assert_one_line_error(ok, &err, &["exp.toml", "compute.device", "--features gpu"]);
 }
 
@@ -264,7 +277,8 @@ fn a_gpu_device_without_the_backend_is_refused() {
 /// key that asked for them (the error surfaced unnamed from the weights).
 #[test]
 fn a_frame_saturated_everywhere_names_the_noise_weights() {
-    let d = tmpdir("bad-saturated");
+    let scratch = tmpdir("bad-saturated");
+    let d = scratch.path();
     let toml = format!(
         "{SMALL}[rig.sensor]\nelectrons_at_full_scale = 1e12\n[reconstruct.gap]\nmethod = \"joint\"\n[reconstruct.joint]\niterations = 5\nnoise_weights = true\n"
     );

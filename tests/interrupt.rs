@@ -17,8 +17,11 @@ fn lines(path: &Path) -> Vec<serde_json::Value> {
 
 #[test]
 fn ctrl_c_stops_camera_dmd_wheel_and_keeps_a_readable_prefix() {
-    let out = std::env::temp_dir().join(format!("specmux-interrupt-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
+    let scratch = tempfile::Builder::new()
+        .prefix("specmux-interrupt-")
+        .tempdir()
+        .unwrap();
+    let out = scratch.path().join("rec");
     let mut child = Command::new(env!("CARGO_BIN_EXE_specmux"))
         .args([
             "rehearse",
@@ -87,5 +90,4 @@ fn ctrl_c_stops_camera_dmd_wheel_and_keeps_a_readable_prefix() {
             .unwrap();
     assert_eq!(outcome["frames"].as_array().unwrap().len(), n);
     assert_eq!(outcome["completed"], false);
-    std::fs::remove_dir_all(&out).unwrap();
 }

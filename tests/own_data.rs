@@ -59,12 +59,13 @@ fn psnr(stdout: &str) -> f64 {
 /// bench report it names.
 #[test]
 fn auto_says_which_device_table_it_picked_from() {
-    let d = tmpdir("own-auto");
-    ok(&d, &["demo", "--size", "64", "--out", "demo"]);
+    let scratch = tmpdir("own-auto");
+    let d = scratch.path();
+    ok(d, &["demo", "--size", "64", "--out", "demo"]);
     let cpu = "[scene]\nsource = \"dead-leaves\"\nsize = [64, 64]\n[compute]\ndevice = \"cpu\"\n";
     std::fs::write(d.join("cpu.toml"), cpu).unwrap();
     let args = ["reconstruct", "demo/frame.exr", "--experiment", "cpu.toml"];
-    let text = ok(&d, &[&args[..], &["--out", "rec"]].concat());
+    let text = ok(d, &[&args[..], &["--out", "rec"]].concat());
     assert!(
         text.contains("auto: ") && text.contains("on two CPU threads"),
         "{text}"
@@ -81,7 +82,7 @@ fn auto_says_which_device_table_it_picked_from() {
     );
     // With `[reconstruct] auto_table` it picks from a bench report of this machine instead.
     ok(
-        &d,
+        d,
         &[
             "bench",
             "dead-leaves",
@@ -96,22 +97,23 @@ fn auto_says_which_device_table_it_picked_from() {
     let own = format!("{cpu}[reconstruct]\nauto_table = \"b/bench.json\"\n");
     std::fs::write(d.join("own.toml"), own).unwrap();
     let args = ["reconstruct", "demo/frame.exr", "--experiment", "own.toml"];
-    let text = ok(&d, &[&args[..], &["--out", "rec-own"]].concat());
+    let text = ok(d, &[&args[..], &["--out", "rec-own"]].concat());
     assert!(text.contains("on the bench report b/bench.json"), "{text}");
 }
 
 #[test]
 fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read() {
-    let d = tmpdir("own-refuse");
-    ok(&d, &["demo", "--size", "64", "--out", "demo"]);
+    let scratch = tmpdir("own-refuse");
+    let d = scratch.path();
+    ok(d, &["demo", "--size", "64", "--out", "demo"]);
     refused(
-        &d,
+        d,
         &["reconstruct", "demo/frame.exr"],
         &["demo/frame.exr", "--experiment"],
     );
     // The 8-bit PNG beside the frame is a preview.
     refused(
-        &d,
+        d,
         &[
             "reconstruct",
             "demo/frame.png",
@@ -123,7 +125,7 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
     // A TIFF that is not one (a truncated header) names the file.
     std::fs::write(d.join("frame.tif"), b"II*\0").unwrap();
     refused(
-        &d,
+        d,
         &["reconstruct", "frame.tif", "--experiment", "dead-leaves"],
         &["frame.tif"],
     );
@@ -131,7 +133,7 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(64, 64, image::Luma([1000]));
     img.save(d.join("raw.png")).unwrap();
     refused(
-        &d,
+        d,
         &["reconstruct", "raw.png", "--experiment", "dead-leaves"],
         &["rig.sensor", "raw.png"],
     );
@@ -139,12 +141,13 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
 
 #[test]
 fn built_in_scene_names_work_in_every_command_and_a_bad_size_names_the_flag() {
-    let d = tmpdir("own-names");
-    let out = ok(&d, &["simulate", "dead-leaves", "--explain"]);
+    let scratch = tmpdir("own-names");
+    let d = scratch.path();
+    let out = ok(d, &["simulate", "dead-leaves", "--explain"]);
     assert!(out.contains("scene"), "{out}");
-    refused(&d, &["simulate", "nope"], &["nope", "built-in scene"]);
+    refused(d, &["simulate", "nope"], &["nope", "built-in scene"]);
     refused(
-        &d,
+        d,
         &["demo", "--size", "100"],
         &["--size", "100", "96 or 112"],
     );
@@ -166,7 +169,8 @@ fn write_cube(path: &Path) -> Cube {
 
 #[test]
 fn an_exr_scene_takes_its_size_and_bands_from_the_file_and_must_say_its_quantity() {
-    let d = tmpdir("own-exr");
+    let scratch = tmpdir("own-exr");
+    let d = scratch.path();
     std::fs::create_dir_all(d.join("exp")).unwrap();
     let cube = write_cube(&d.join("exp/mine.exr"));
     let exp = |extra: &str| {
@@ -178,18 +182,18 @@ fn an_exr_scene_takes_its_size_and_bands_from_the_file_and_must_say_its_quantity
     };
     exp("");
     refused(
-        &d,
+        d,
         &["simulate", "exp/e.toml"],
         &["exp/e.toml", "scene.quantity", "mine.exr"],
     );
     exp("quantity = \"reflectance\"\nsize = [64, 64]\n");
     refused(
-        &d,
+        d,
         &["simulate", "exp/e.toml"],
         &["scene.size", "[64, 64]", "48×32"],
     );
     exp("quantity = \"reflectance\"\n");
-    ok(&d, &["simulate", "exp/e.toml", "--out", "sim"]);
+    ok(d, &["simulate", "exp/e.toml", "--out", "sim"]);
     let (truth, names) = specmux_io::exr::read(&d.join("sim/truth.exr")).unwrap();
     assert_eq!((truth.width, truth.height, truth.planes), (48, 32, 16));
     assert_eq!(truth.data, cube.data);
@@ -200,7 +204,8 @@ fn an_exr_scene_takes_its_size_and_bands_from_the_file_and_must_say_its_quantity
 
 #[test]
 fn curves_given_as_csv_paths_are_read_beside_the_experiment() {
-    let d = tmpdir("own-csv");
+    let scratch = tmpdir("own-csv");
+    let d = scratch.path();
     let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");
     std::fs::create_dir_all(d.join("exp/curves")).unwrap();
     for (from, to) in [
@@ -223,8 +228,8 @@ fn curves_given_as_csv_paths_are_read_beside_the_experiment() {
         wheel("curves/red.csv")
     );
     std::fs::write(d.join("exp/own.toml"), own).unwrap();
-    ok(&d, &["simulate", "exp/lib.toml", "--out", "a"]);
-    ok(&d, &["simulate", "exp/own.toml", "--out", "b"]);
+    ok(d, &["simulate", "exp/lib.toml", "--out", "a"]);
+    ok(d, &["simulate", "exp/own.toml", "--out", "b"]);
     let frame = |dir: &str| {
         specmux_io::exr::read(&d.join(dir).join("frame.exr"))
             .unwrap()
@@ -237,7 +242,7 @@ fn curves_given_as_csv_paths_are_read_beside_the_experiment() {
     );
     std::fs::remove_file(d.join("exp/qe.csv")).unwrap();
     refused(
-        &d,
+        d,
         &["simulate", "exp/own.toml"],
         &["exp/own.toml", "rig.camera.qe", "exp/qe.csv"],
     );
@@ -247,12 +252,13 @@ const MISALIGNED: &str = "[rig.alignment]\nrotation_deg = 0.4\nmagnification = 1
 
 #[test]
 fn measured_calibration_frames_are_used_by_reconstruct() {
-    let d = tmpdir("own-cal");
+    let scratch = tmpdir("own-cal");
+    let d = scratch.path();
     let base = "[scene]\nsource = \"shaded-objects\"\nsize = [256, 256]\n[reconstruct.gap]\nmethod = \"fourier\"\n[rig.sensor]\n";
     std::fs::write(d.join("rig.toml"), format!("{base}{MISALIGNED}")).unwrap();
     std::fs::write(d.join("design.toml"), base).unwrap();
     // The rig as built (misaligned) records the frame and its calibration frames.
-    ok(&d, &["simulate", "rig.toml", "--out", "rec"]);
+    ok(d, &["simulate", "rig.toml", "--out", "rec"]);
     for f in ["dark", "flat", "pattern-1", "pattern-6"] {
         assert!(d.join(format!("rec/calibration/{f}.exr")).is_file(), "{f}");
     }
@@ -263,7 +269,7 @@ fn measured_calibration_frames_are_used_by_reconstruct() {
         if cal {
             a.extend(["--calibration", "rec/calibration"]);
         }
-        let text = ok(&d, &a);
+        let text = ok(d, &a);
         (psnr(&text), text)
     };
     let (with, text) = run("design.toml", true, "with");
@@ -301,7 +307,7 @@ fn measured_calibration_frames_are_used_by_reconstruct() {
         "--calibration",
         "rec/calibration",
     ]);
-    let tif = psnr(&ok(&d, &[&a[..], &["--out", "tif"]].concat()));
+    let tif = psnr(&ok(d, &[&a[..], &["--out", "tif"]].concat()));
     assert_eq!(tif, with, "TIFF {tif} dB against EXR {with} dB");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(d.join("with/reconstruct.json")).unwrap())
@@ -325,7 +331,7 @@ fn measured_calibration_frames_are_used_by_reconstruct() {
         "design.toml",
     ];
     refused(
-        &d,
+        d,
         &[&a[..], &["--calibration", "rec/calibration"]].concat(),
         &["pattern-6.exr"],
     );
@@ -405,7 +411,8 @@ fn check_schema(file: &str, report: &serde_json::Value) {
 fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder() {
     // The binary copied out of the build tree, run from an empty folder: nothing of the
     // checkout is near it, and SPECMUX_SPECTRA is unset.
-    let d = tmpdir("own-install");
+    let scratch = tmpdir("own-install");
+    let d = scratch.path();
     let bin_dir = d.join("bin");
     std::fs::create_dir_all(&bin_dir).unwrap();
     let bin: PathBuf = bin_dir.join("specmux");
@@ -471,12 +478,13 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
 /// under its noise, in the text and in reconstruct.json.
 #[test]
 fn reconstruct_warns_of_a_frame_under_its_noise() {
-    let d = tmpdir("own-dim");
+    let scratch = tmpdir("own-dim");
+    let d = scratch.path();
     let exp = "[scene]\nsize = [64, 64]\n[reconstruct.gap]\nmethod = \"fourier\"\n[rig.sensor]\nelectrons_at_full_scale = 1e-6\n";
     std::fs::write(d.join("dim.toml"), exp).unwrap();
-    ok(&d, &["simulate", "dim.toml", "--out", "rec"]);
+    ok(d, &["simulate", "dim.toml", "--out", "rec"]);
     let text = ok(
-        &d,
+        d,
         &[
             "reconstruct",
             "rec/frame.exr",

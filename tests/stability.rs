@@ -12,8 +12,8 @@ use specmux_core::unmix::Unmixer;
 use specmux_core::{Cube, Error};
 use specmux_twin::experiment::Experiment;
 use specmux_twin::run::{self, RunReport};
-use std::path::PathBuf;
 use std::process::Command;
+use tempfile::TempDir;
 
 mod common;
 
@@ -83,19 +83,21 @@ fn finite(case: &str, rep: &RunReport) {
     );
 }
 
-fn temp(tag: &str) -> PathBuf {
+/// A scratch folder `specmux-stab-{tag}-*`, removed when the returned guard drops.
+fn temp(tag: &str) -> TempDir {
     common::tmpdir(&format!("stab-{tag}"))
 }
 
-/// A copy of spectra/ whose `name` curve is replaced by `csv`.
-fn library_with(tag: &str, name: &str, csv: &str) -> Library {
-    let dst = common::spectra_copy(&temp(tag));
+/// A copy of spectra/ whose `name` curve is replaced by `csv`, and the guard of its folder.
+fn library_with(tag: &str, name: &str, csv: &str) -> (TempDir, Library) {
+    let scratch = temp(tag);
+    let dst = common::spectra_copy(scratch.path());
     std::fs::write(
         dst.join(format!("{name}.csv")),
         format!("# provenance: stability test\n{csv}"),
     )
     .unwrap();
-    Library::new(dst)
+    (scratch, Library::new(dst))
 }
 
 // ---------------------------------------------------------------- unmixing
@@ -404,7 +406,7 @@ fn sizes_beyond_the_memory() {
 // ---------------------------------------------------------------- spectra
 
 fn filter_case(case: &str, csv: &str, needles: &[&str]) {
-    let lib = library_with(&case.replace(' ', "-"), "wheel/green", csv);
+    let (_scratch, lib) = library_with(&case.replace(' ', "-"), "wheel/green", csv);
     refused(case, run_with(&toml(""), &lib), needles);
 }
 
@@ -470,13 +472,13 @@ fn spectra_filter_outside_the_grid() {
 #[test]
 fn spectra_all_zero_illuminant_and_qe() {
     let zero = "wavelength_nm,v\n380,0\n780,0\n";
-    let lib = library_with("zero-light", "illuminants/D65", zero);
+    let (_scratch, lib) = library_with("zero-light", "illuminants/D65", zero);
     refused(
         "spectra: an all-zero illuminant",
         run_with(&toml(""), &lib),
         &["scene.illuminant"],
     );
-    let lib = library_with("zero-qe", "camera/mono_qe", zero);
+    let (_scratch, lib) = library_with("zero-qe", "camera/mono_qe", zero);
     refused(
         "spectra: an all-zero QE",
         run_with(&toml(""), &lib),
@@ -654,7 +656,8 @@ fn specmux(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn cli_a_raw_frame_with_nan_is_refused() {
-    let d = temp("nan-frame");
+    let scratch = temp("nan-frame");
+    let d = scratch.path();
     let mut y = Cube::from_vec(64, 64, 1, vec![1.0; 64 * 64]).unwrap();
     y.data[5] = f32::NAN;
     let f = d.join("frame.exr");
@@ -681,7 +684,8 @@ fn cli_a_raw_frame_with_nan_is_refused() {
 
 #[test]
 fn cli_a_truth_of_the_wrong_size_is_refused_before_anything_is_written() {
-    let d = temp("truth-size");
+    let scratch = temp("truth-size");
+    let d = scratch.path();
     let f = d.join("frame.exr");
     specmux_io::exr::write(
         &f,
@@ -718,7 +722,8 @@ fn cli_a_truth_of_the_wrong_size_is_refused_before_anything_is_written() {
 
 #[test]
 fn cli_a_killed_run_leaves_no_file_under_the_final_names() {
-    let d = temp("killed");
+    let scratch = temp("killed");
+    let d = scratch.path();
     let out = d.join("out");
     let mut child = Command::new(env!("CARGO_BIN_EXE_specmux"))
         .args(["demo", "--size", "384", "--out", out.to_str().unwrap()])
@@ -728,7 +733,7 @@ fn cli_a_killed_run_leaves_no_file_under_the_final_names() {
     // Kill it while it writes: once its staging folder holds a file.
     let t = std::time::Instant::now();
     let writing = loop {
-        let staged = std::fs::read_dir(&d).unwrap().flatten().any(|e| {
+        let staged = std::fs::read_dir(d).unwrap().flatten().any(|e| {
             e.file_name().to_string_lossy().contains(".staging-")
                 && std::fs::read_dir(e.path()).is_ok_and(|mut r| r.next().is_some())
         });
@@ -751,7 +756,7 @@ fn cli_a_killed_run_leaves_no_file_under_the_final_names() {
         next.status.success() && said.contains("interrupted run"),
         "{said}"
     );
-    let left: Vec<_> = std::fs::read_dir(&d)
+    let left: Vec<_> = std::fs::read_dir(d)
         .unwrap()
         .flatten()
         .map(|e| e.file_name())
@@ -765,7 +770,8 @@ fn cli_a_killed_run_leaves_no_file_under_the_final_names() {
 
 #[test]
 fn cli_two_concurrent_runs_into_one_folder_leave_one_whole_set() {
-    let d = temp("concurrent");
+    let scratch = temp("concurrent");
+    let d = scratch.path();
     let out = d.join("out");
     let run = |scene: &str| {
         Command::new(env!("CARGO_BIN_EXE_specmux"))
@@ -814,7 +820,8 @@ fn cli_two_concurrent_runs_into_one_folder_leave_one_whole_set() {
 
 #[test]
 fn cli_same_seed_same_bytes_whatever_the_thread_count() {
-    let d = temp("threads");
+    let scratch = temp("threads");
+    let d = scratch.path();
     let run = |threads: &str, out: &str| {
         let o = Command::new(env!("CARGO_BIN_EXE_specmux"))
             .env("RAYON_NUM_THREADS", threads)
@@ -852,7 +859,8 @@ fn cli_same_seed_same_bytes_whatever_the_thread_count() {
 
 #[test]
 fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
-    let d = temp("ctrl-c");
+    let scratch = temp("ctrl-c");
+    let d = scratch.path();
     let out = d.join("out");
     let values: Vec<String> = (1..=300).map(|i| i.to_string()).collect();
     let vary = format!("reconstruct.gap.iterations={}", values.join(";"));
@@ -875,7 +883,7 @@ fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(err.contains("interrupted (Ctrl-C) during"), "{err}");
     assert!(!out.exists(), "an interrupted sweep wrote its outputs");
-    let left = std::fs::read_dir(&d).unwrap().count();
+    let left = std::fs::read_dir(d).unwrap().count();
     assert_eq!(left, 0, "an interrupted sweep left a staging folder");
     record(
         "cli: Ctrl-C during a 300-run sweep",

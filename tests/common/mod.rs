@@ -2,13 +2,14 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
+use tempfile::TempDir;
 
-/// A fresh scratch folder named after the test and this process.
-pub fn tmpdir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("specmux-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh scratch folder `specmux-{tag}-*`, removed when the returned guard drops.
+pub fn tmpdir(tag: &str) -> TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("specmux-{tag}-"))
+        .tempdir()
+        .unwrap()
 }
 
 /// A copy of the real spectra/ folder inside `dir` that a test may corrupt.

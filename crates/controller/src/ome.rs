@@ -406,15 +406,19 @@ pub fn ome_xml(img: &OmeImage) -> String {
 mod tests {
     use super::*;
 
-    fn tmp(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("specmux-ome-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&d).unwrap();
-        d.join("t.ome.tif")
+    /// A fresh scratch folder's guard (it removes the folder on drop) and `t.ome.tif` in it.
+    fn tmp(name: &str) -> (tempfile::TempDir, PathBuf) {
+        let d = tempfile::Builder::new()
+            .prefix(&format!("specmux-ome-{name}-"))
+            .tempdir()
+            .unwrap();
+        let path = d.path().join("t.ome.tif");
+        (d, path)
     }
 
     #[test]
     fn every_prefix_is_a_valid_tiff_and_the_description_grows_past_its_room() {
-        let path = tmp("prefix");
+        let (_scratch, path) = tmp("prefix");
         let mut w = TiffWriter::create(&path, 3, 2, Sample::U16, 80).unwrap();
         w.set_description("<a/>").unwrap();
         for k in 0..4u16 {
@@ -433,7 +437,7 @@ mod tests {
 
     #[test]
     fn float_planes_round_trip_and_garbage_is_refused() {
-        let path = tmp("float");
+        let (_scratch, path) = tmp("float");
         let mut w = TiffWriter::create(&path, 2, 2, Sample::F32, 64).unwrap();
         let v = [1.5f32, -2.25, 3.0e-7, 4096.0];
         w.append(&v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<_>>())
@@ -452,7 +456,7 @@ mod tests {
 
     /// A file of one 2×2 u16 page whose IFD's next pointer is `next(ifd offset)`.
     fn one_page_linked_to(name: &str, next: impl Fn(u32) -> u32) -> Vec<u8> {
-        let path = tmp(name);
+        let (_scratch, path) = tmp(name);
         let mut w = TiffWriter::create(&path, 2, 2, Sample::U16, 64).unwrap();
         w.append(&[1, 0, 2, 0, 3, 0, 4, 0]).unwrap();
         let mut b = std::fs::read(&path).unwrap();

@@ -6,21 +6,27 @@ use specmux_controller::commands::{acquire, rehearse, RunOptions};
 use specmux_controller::ome;
 use specmux_controller::real::RealRigArgs;
 use std::path::PathBuf;
+use tempfile::TempDir;
 
-fn setup(name: &str, scene: &str) -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("specmux-cmd-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// A scratch folder's guard (it removes the folder on drop), an experiment file in it, its out/.
+fn setup(name: &str, scene: &str) -> (TempDir, PathBuf, PathBuf) {
+    let scratch = tempfile::Builder::new()
+        .prefix(&format!("specmux-cmd-{name}-"))
+        .tempdir()
+        .unwrap();
+    let dir = scratch.path();
     let file = dir.join("exp.toml");
     let text = format!(
         "[scene]\nsource = \"shaded-objects\"\nsize = [64, 64]\nseed = 11\n{scene}\n[calibration]\nframes = 2\n[rig.timing]\n[rig.sensor]\n"
     );
     std::fs::write(&file, text).unwrap();
-    (file, dir.join("out"))
+    let out = dir.join("out");
+    (scratch, file, out)
 }
 
 #[test]
 fn a_dry_run_prints_plan_checks_and_timeline_and_writes_nothing() {
-    let (file, out) = setup("dry", "");
+    let (_scratch, file, out) = setup("dry", "");
     let o = RunOptions::new(file.clone(), 10, true, vec![], Some(out.clone()));
     let text = rehearse(&o, &common::lib()).unwrap();
     for part in [
@@ -58,7 +64,7 @@ fn a_dry_run_prints_plan_checks_and_timeline_and_writes_nothing() {
 /// pass unnoticed and the rehearsal would look fault-tolerant.
 #[test]
 fn a_fault_past_the_plan_is_refused() {
-    let (file, out) = setup("late-fault", "");
+    let (_scratch, file, out) = setup("late-fault", "");
     let faults = vec!["dropped-frame@3".to_string()];
     let o = RunOptions::new(file, 3, false, faults, Some(out.clone()));
     let err = rehearse(&o, &common::lib()).unwrap_err();
@@ -71,7 +77,7 @@ fn a_fault_past_the_plan_is_refused() {
 
 #[test]
 fn rehearsing_a_moving_scene_reconstructs_every_frame() {
-    let (file, out) = setup("moving", "velocity_px_per_s = [200, 0]");
+    let (_scratch, file, out) = setup("moving", "velocity_px_per_s = [200, 0]");
     let o = RunOptions::new(
         file,
         3,
@@ -100,7 +106,7 @@ fn rehearsing_a_moving_scene_reconstructs_every_frame() {
 
 #[test]
 fn acquire_writes_the_files_and_refuses_an_unbuilt_backend() {
-    let (file, out) = setup("acquire", "");
+    let (_scratch, file, out) = setup("acquire", "");
     let o = RunOptions::new(file, 2, false, vec![], Some(out.clone()));
     let none = RealRigArgs::default();
     let text = acquire("sim", &o, &none, &common::lib()).unwrap();
@@ -170,7 +176,7 @@ fn only_the_shaded_objects_can_move_and_at_a_finite_speed() {
 #[test]
 fn a_rehearsal_folder_reconstructs_to_the_errors_the_rehearsal_reported() {
     use specmux_controller::reconstruct::reconstruct_recording;
-    let (file, rec) = setup("replay", "velocity_px_per_s = [200, 0]");
+    let (_scratch, file, rec) = setup("replay", "velocity_px_per_s = [200, 0]");
     let o = RunOptions::new(file, 3, false, vec![], Some(rec.clone()));
     rehearse(&o, &common::lib()).unwrap();
     let out = rec.with_file_name("replay-out");
@@ -208,5 +214,4 @@ fn a_rehearsal_folder_reconstructs_to_the_errors_the_rehearsal_reported() {
     assert!(read(out.join("reconstruct.json"))
         .iter()
         .all(|r| r["psnr_db"].is_null()));
-    std::fs::remove_dir_all(rec.parent().unwrap()).unwrap();
 }

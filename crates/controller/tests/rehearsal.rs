@@ -151,7 +151,11 @@ fn devices_are_driven_in_order_and_stopped_camera_dmd_wheel() {
 #[test]
 fn the_recording_reads_back_and_an_interrupted_one_keeps_its_prefix() {
     let exp = experiment("");
-    let dir = std::env::temp_dir().join(format!("specmux-rec-{}", std::process::id()));
+    let scratch = tempfile::Builder::new()
+        .prefix("specmux-rec-")
+        .tempdir()
+        .unwrap();
+    let dir = scratch.path().join("rec");
     let (sim, _) = rig(&exp, &[]);
     let mut dev = sim.devices();
     let p = plan(&exp, 5);
@@ -212,5 +216,4 @@ fn the_recording_reads_back_and_an_interrupted_one_keeps_its_prefix() {
     let kept = both.1.calibration.as_ref().unwrap();
     assert_eq!(cal.patterns, kept.patterns);
     assert_eq!((cal.dark, cal.frames_averaged), (kept.dark.clone(), 4));
-    std::fs::remove_dir_all(&dir).ok();
 }

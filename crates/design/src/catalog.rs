@@ -282,13 +282,15 @@ mod tests {
         let g = Families::default().generate("t").unwrap();
         assert_eq!(m.len() + g.len(), 40);
         // A written generated curve reads back as the same curve, and is then skipped.
-        let dir = std::env::temp_dir().join(format!("specmux-cat-{}", std::process::id()));
-        let tmp = Library::new(&dir);
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-cat-")
+            .tempdir()
+            .unwrap();
+        let tmp = Library::new(scratch.path());
         write_generated(&[&g[3]], &tmp).unwrap();
         let back = tmp.curve(&g[3].name).unwrap();
         assert!((back.eval(537.0) - g[3].curve.eval(537.0)).abs() < 1e-6);
         assert!(measured(&tmp, &tmp).unwrap().is_empty());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -9,6 +9,7 @@ use specmux_design::layout::Guard;
 use specmux_twin::scene::Materials;
 use specmux_twin::{Experiment, Rig};
 use std::path::{Path, PathBuf};
+use tempfile::TempDir;
 
 fn repo(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -16,10 +17,12 @@ fn repo(rel: &str) -> PathBuf {
         .join(rel)
 }
 
-fn temp(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("specmux-design-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    d
+/// A fresh scratch folder `specmux-design-{tag}-*`, removed when the returned guard drops.
+fn temp(tag: &str) -> TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("specmux-design-{tag}-"))
+        .tempdir()
+        .unwrap()
 }
 
 fn carrier_args(out: PathBuf) -> CarrierArgs {
@@ -45,7 +48,8 @@ fn carrier_args(out: PathBuf) -> CarrierArgs {
 #[test]
 fn a_designed_layout_is_never_worse_than_the_papers_on_its_design_scenes() {
     let lib = Library::default_root();
-    let d = carriers::design(&carrier_args(temp("c0")), &lib).unwrap();
+    let scratch = temp("c0");
+    let d = carriers::design(&carrier_args(scratch.path().join("out")), &lib).unwrap();
     assert_eq!(d.simulation_scenes, ["bars", "dead-leaves"]);
     let (paper, chosen) = (&d.candidates[0], &d.candidates[d.chosen]);
     assert!(paper.label.starts_with("paper"));
@@ -75,7 +79,8 @@ fn a_designed_layout_is_never_worse_than_the_papers_on_its_design_scenes() {
 
 #[test]
 fn the_carrier_section_is_included_by_an_experiment_unchanged() {
-    let out = temp("c1");
+    let scratch = temp("c1");
+    let out = scratch.path().join("out");
     carriers::run(&carrier_args(out.clone()), &Library::default_root()).unwrap();
     let section = std::fs::read_to_string(out.join("carriers.toml")).unwrap();
     let text = format!("[scene]\nsource = \"bars\"\nsize = [64, 64]\n\n{section}");
@@ -85,7 +90,6 @@ fn the_carrier_section_is_included_by_an_experiment_unchanged() {
     for f in ["fourier_paper.png", "report.json"] {
         assert!(out.join(f).exists(), "{f}");
     }
-    std::fs::remove_dir_all(&out).unwrap();
 }
 
 /// A copy of spectra/ without generated curves, so the test writes its own.
@@ -108,7 +112,8 @@ fn library_copy(dir: &Path) -> Library {
 
 #[test]
 fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
-    let dir = temp("f0");
+    let scratch = temp("f0");
+    let dir = scratch.path();
     let lib = library_copy(&dir.join("spectra"));
     let fam = dir.join("families.toml");
     std::fs::write(&fam, "gaussian_centres_nm = [450, 650, 100]\ngaussian_fwhm_nm = [80]\nlongpass_edges_nm = [600, 600, 40]\nshortpass_edges_nm = [500, 500, 40]\ndichroic_bands_nm = []\n").unwrap();
@@ -164,7 +169,6 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
     .unwrap();
     let rig = Rig::build(&exp, &lib, &Materials::load(&lib).unwrap()).unwrap();
     assert_eq!(rig.wheel.filters.len(), 6);
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// Counts and fractions out of range are refused by their option before any work (zero
@@ -172,7 +176,8 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
 #[test]
 fn carrier_options_out_of_range_are_refused_by_name() {
     let lib = Library::default_root();
-    let base = carrier_args(temp("c-bad"));
+    let scratch = temp("c-bad");
+    let base = carrier_args(scratch.path().join("out"));
     for (bad, flag) in [
         (
             CarrierArgs {

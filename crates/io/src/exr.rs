@@ -154,7 +154,11 @@ mod tests {
 
     #[test]
     fn round_trip_is_bit_exact() {
-        let dir = std::env::temp_dir().join(format!("specmux-exr-{}", std::process::id()));
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-exr-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let path = dir.join("c.exr");
         let mut cube = Cube::zeros(5, 3, 3);
         for (i, v) in cube.data.iter_mut().enumerate() {
@@ -171,7 +175,6 @@ mod tests {
             back.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
             cube.data.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
         );
-        std::fs::remove_dir_all(dir).ok();
     }
 
     #[test]

@@ -164,8 +164,11 @@ mod tests {
 
     #[test]
     fn a_16_bit_tiff_reads_as_the_same_dn_as_the_png_and_8_bits_are_refused() {
-        let dir = std::env::temp_dir().join(format!("specmux-frame-tif-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-frame-tif-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let img =
             image::ImageBuffer::from_fn(5, 3, |x, y| image::Luma([(x * 1000 + y * 7) as u16]));
         let (tif, png) = (dir.join("f.tif"), dir.join("f.png"));
@@ -180,6 +183,5 @@ mod tests {
         grey8.save(dir.join("g.tif")).unwrap();
         let e = read(&dir.join("g.tif")).unwrap_err().to_string();
         assert!(e.contains("g.tif") && e.contains("preview"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -137,16 +137,18 @@ fn process_alive(pid: u32) -> bool {
 mod tests {
     use super::*;
 
-    fn temp(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("specmux-outset-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    /// A fresh scratch folder `specmux-outset-{name}-*`, removed when the returned guard drops.
+    fn temp(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("specmux-outset-{name}-"))
+            .tempdir()
+            .unwrap()
     }
 
     #[test]
     fn nothing_appears_before_the_commit_and_everything_after() {
-        let d = temp("commit");
+        let scratch = temp("commit");
+        let d = scratch.path();
         let target = d.join("out");
         let set = OutputSet::begin(&target).unwrap();
         std::fs::write(set.path("a.txt"), "1").unwrap();
@@ -158,18 +160,19 @@ mod tests {
         std::fs::write(set.path("b.txt"), "2").unwrap();
         set.commit().unwrap();
         assert!(!target.join("a.txt").exists() && target.join("b.txt").exists());
-        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 1, "no staging left");
+        assert_eq!(std::fs::read_dir(d).unwrap().count(), 1, "no staging left");
     }
 
     #[test]
     fn a_failed_run_leaves_nothing_and_a_dead_runs_leftovers_are_removed() {
-        let d = temp("drop");
+        let scratch = temp("drop");
+        let d = scratch.path();
         let target = d.join("out");
         {
             let set = OutputSet::begin(&target).unwrap();
             std::fs::write(set.path("half.exr"), "x").unwrap();
         }
-        assert_eq!(std::fs::read_dir(&d).unwrap().count(), 0);
+        assert_eq!(std::fs::read_dir(d).unwrap().count(), 0);
         // A staging folder of a process that no longer exists (pid 0 is never a user process).
         std::fs::create_dir(d.join(".out.staging-0-0")).unwrap();
         let set = OutputSet::begin(&target).unwrap();

@@ -72,8 +72,11 @@ mod tests {
 
     #[test]
     fn a_16_bit_frame_reads_back_exactly_and_a_fraction_is_refused() {
-        let dir = std::env::temp_dir().join(format!("specmux-png16-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-png16-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let path = dir.join("f.png");
         let frame = Cube::from_vec(3, 2, 1, vec![0.0, 1.0, 4095.0, 65535.0, 7.0, 300.0]).unwrap();
         dn_png16(&path, &frame).unwrap();
@@ -82,6 +85,5 @@ mod tests {
         let bad = Cube::from_vec(2, 1, 1, vec![1.0, 2.5]).unwrap();
         let e = dn_png16(&path, &bad).unwrap_err().to_string();
         assert!(e.contains("2.5") && e.contains("(1, 0)"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -364,14 +364,17 @@ mod tests {
 
     #[test]
     fn pngs_are_written() {
-        let dir = std::env::temp_dir().join(format!("specmux-patterns-{}", std::process::id()));
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-patterns-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let (_, set) =
             pattern_report(&small_rig(), &default_layout()[..2], &line(2), 64, 64, 0.25).unwrap();
-        write_pattern_pngs(&set, &default_layout()[..2], &dir).unwrap();
+        write_pattern_pngs(&set, &default_layout()[..2], dir).unwrap();
         let img = image::open(dir.join("pattern_1.png")).unwrap();
         // Four panels with axes and colour bars, each wider than the 128-mirror pattern.
         assert!(img.width() > 4 * 128 && img.height() > 2 * 128, "{img:?}");
         assert!(!dir.join("pattern_2.png").exists());
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -4,8 +4,14 @@ use specmux_report::{ptc::plot_ptc, timeline::timeline_png};
 use specmux_twin::sensor::{default_levels, photon_transfer, Sensor, SensorConfig};
 use specmux_twin::timing::TimingConfig;
 
-fn temp(name: &str) -> std::path::PathBuf {
-    std::env::temp_dir().join(format!("specmux-{}-{name}", std::process::id()))
+/// The path `name` in a fresh scratch folder, and the folder's guard (it removes it on drop).
+fn temp(name: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+    let d = tempfile::Builder::new()
+        .prefix("specmux-figures-")
+        .tempdir()
+        .unwrap();
+    let path = d.path().join(name);
+    (d, path)
 }
 
 #[test]
@@ -13,11 +19,10 @@ fn photon_transfer_png_is_written() {
     let cfg = SensorConfig::default();
     let sensor = Sensor::new(&cfg, 64, 64).unwrap();
     let r = photon_transfer(&sensor, &default_levels(cfg.full_well_e)).unwrap();
-    let path = temp("ptc.png");
+    let (_scratch, path) = temp("ptc.png");
     plot_ptc(&r, &path).unwrap();
     let png = image::open(&path).unwrap();
     assert_eq!((png.width(), png.height()), (900, 600));
-    std::fs::remove_file(&path).unwrap();
 }
 
 #[test]
@@ -26,7 +31,7 @@ fn timeline_png_is_written() {
     c.wheel.spot_diameter_mm = 1.0;
     c.wheel.spot_radius_mm = 20.0;
     c.camera.exposure_s = 0.0405;
-    let path = temp("timeline.png");
+    let (_scratch, path) = temp("timeline.png");
     timeline_png(&c, &[], &path).unwrap();
     let img = image::open(&path).unwrap().to_rgb8();
     assert_eq!(img.width(), 1500);
@@ -36,21 +41,19 @@ fn timeline_png_is_written() {
         .filter(|p| p.0.iter().max().unwrap() - p.0.iter().min().unwrap() > 60)
         .count();
     assert!(coloured > 10_000, "{coloured}");
-    std::fs::remove_file(&path).unwrap();
 }
 
 #[test]
 fn timeline_segments_take_the_filters_colours() {
     let c = TimingConfig::default();
     let chips: Vec<[u8; 3]> = (0..6).map(|i| [200, 20 + 30 * i as u8, 10]).collect();
-    let path = temp("timeline-chips.png");
+    let (_scratch, path) = temp("timeline-chips.png");
     timeline_png(&c, &chips, &path).unwrap();
     let img = image::open(&path).unwrap().to_rgb8();
     for chip in &chips {
         let n = img.pixels().filter(|p| p.0 == *chip).count();
         assert!(n > 500, "chip {chip:?}: {n} pixels");
     }
-    std::fs::remove_file(&path).unwrap();
 }
 
 #[test]
@@ -72,7 +75,7 @@ fn trigger_chain_draws_every_lane_in_its_window() {
         ("a frame".to_string(), 0.0, 0.05),
         ("zoom".to_string(), 0.0015, 0.0045),
     ];
-    let path = temp("trigger-chain.png");
+    let (_scratch, path) = temp("trigger-chain.png");
     trigger_chain_png(&path, &lanes, &windows).unwrap();
     let img = image::open(&path).unwrap().to_rgb8();
     assert_eq!((img.width(), img.height()), (1500, 2 * (70 + 80)));
@@ -81,5 +84,4 @@ fn trigger_chain_draws_every_lane_in_its_window() {
         .filter(|p| p.0.iter().max().unwrap() - p.0.iter().min().unwrap() > 40)
         .count();
     assert!(coloured > 20_000, "{coloured}");
-    std::fs::remove_file(&path).unwrap();
 }

@@ -114,17 +114,20 @@ mod tests {
          "psnr_db": 24.9, "seconds": 0.5, "frame": [384, 384]}
     ]}"#;
 
-    fn write(name: &str, text: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("specmux-auto-table-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join(name);
+    /// `text` as file `name` in a fresh scratch folder, and its guard (it removes it on drop).
+    fn write(name: &str, text: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+        let dir = tempfile::Builder::new()
+            .prefix("specmux-auto-table-")
+            .tempdir()
+            .unwrap();
+        let p = dir.path().join(name);
         std::fs::write(&p, text).unwrap();
-        p
+        (dir, p)
     }
 
     #[test]
     fn usable_rows_become_entries_scaled_to_768() {
-        let p = write("bench.json", REPORT);
+        let (_scratch, p) = write("bench.json", REPORT);
         let e = load(&p, "bench.json", "exp.toml").unwrap();
         assert_eq!(e.len(), 2);
         // 384² is a quarter of 768²: four times the time.
@@ -144,9 +147,8 @@ mod tests {
             ("neg.json", nan.as_str(), "time -1 s"),
             ("junk.json", "{", "not a specmux bench report"),
         ] {
-            let e = load(&write(name, text), name, "exp.toml")
-                .unwrap_err()
-                .to_string();
+            let (_scratch, p) = write(name, text);
+            let e = load(&p, name, "exp.toml").unwrap_err().to_string();
             assert!(
                 e.contains("exp.toml") && e.contains("reconstruct.auto_table") && e.contains(name),
                 "{e}"

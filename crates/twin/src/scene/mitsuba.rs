@@ -350,23 +350,27 @@ mod tests {
 
     #[test]
     fn bad_files_and_keys_are_named() {
-        let dir = std::env::temp_dir().join(format!("specmux-mitsuba-{}", std::process::id()));
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-mitsuba-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let g = Grid::VISIBLE;
         let mut names: Vec<String> = g.wavelengths().into_iter().map(exr_io::band_name).collect();
         names.pop();
-        let p = write_exr(&dir, "short_truth.exr", 16, 16, &names);
+        let p = write_exr(dir, "short_truth.exr", 16, 16, &names);
         let e = read_truth(&p, &g).unwrap_err().to_string();
         assert!(
             e.contains("short_truth.exr") && e.contains("30 channels"),
             "{e}"
         );
         names.push("0705.0nm".into());
-        let p = write_exr(&dir, "shifted_truth.exr", 16, 16, &names);
+        let p = write_exr(dir, "shifted_truth.exr", 16, 16, &names);
         let e = read_truth(&p, &g).unwrap_err().to_string();
         assert!(e.contains("`0705.0nm`") && e.contains("`0700.0nm`"), "{e}");
         names.pop();
         names.push("0700.0nm".into());
-        write_exr(&dir, "ok_truth.exr", 16, 16, &names);
+        write_exr(dir, "ok_truth.exr", 16, 16, &names);
 
         let exp_file = dir.join("e.toml").display().to_string();
         let toml = "[scene]\nsource = \"mitsuba:ok\"\nquantity = \"radiance\"\nsize = [32, 32]\n";
@@ -385,6 +389,5 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("scene.source"), "{e}");
-        std::fs::remove_dir_all(dir).ok();
     }
 }
