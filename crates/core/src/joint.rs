@@ -765,26 +765,32 @@ impl Joint {
     ) {
         let (w, j, nb, wj) = (self.w, self.j, self.nbp, self.w * self.j);
         let [sigma, lambda, flush, tau] = t.step;
-        for k in 0..s.sums.len() {
-            let yy = s.y0 + k;
+        let Strip {
+            y0,
+            f,
+            next_bar,
+            next_alpha,
+        } = s;
+        for k in 0..f.sums.len() {
+            let yy = y0 + k;
             if cost {
-                let next = s.alpha.get((k + 1) * wj..(k + 2) * wj).or(s.next_alpha);
-                s.sums[k] = self.row_cost(
-                    (&s.alpha[k * wj..(k + 1) * wj], next),
+                let next = f.alpha.get((k + 1) * wj..(k + 2) * wj).or(next_alpha);
+                f.sums[k] = self.row_cost(
+                    (&f.alpha[k * wj..(k + 1) * wj], next),
                     &t.data,
                     lambda,
                     yy,
                     (ga, gb),
                 );
             }
-            let next = s.bar.get((k + 1) * wj..(k + 2) * wj).or(s.next_bar);
-            let bar = &s.bar[k * wj..(k + 1) * wj];
+            let next = f.bar.get((k + 1) * wj..(k + 2) * wj).or(next_bar);
+            let bar = &f.bar[k * wj..(k + 1) * wj];
             row_gradients((bar, next), j, ga, gb);
             let row = DualRow {
-                qx: &mut s.qx[k * wj..(k + 1) * wj],
-                qy: &mut s.qy[k * wj..(k + 1) * wj],
-                r: &mut s.r[k * w * nb..(k + 1) * w * nb],
-                active: &mut s.active[k * w..(k + 1) * w],
+                qx: &mut f.qx[k * wj..(k + 1) * wj],
+                qy: &mut f.qy[k * wj..(k + 1) * wj],
+                r: &mut f.r[k * w * nb..(k + 1) * w * nb],
+                active: &mut f.active[k * w..(k + 1) * w],
                 weight: &t.data.tvw[yy * w..(yy + 1) * w],
             };
             let step = DualStep {
@@ -796,12 +802,12 @@ impl Joint {
             };
             with_basis_len!(j, J => lane::dispatch(DualKernel::<J> { joint: self, row, bar, step }));
             if k > 0 {
-                let up = Some(&s.qy[(k - 1) * wj..k * wj]);
-                row_divergence(&s.qx[k * wj..], &s.qy[k * wj..], up, j, ga);
-                let duals = (&s.active[k * w..], &s.r[k * w * nb..]);
+                let up = Some(&f.qy[(k - 1) * wj..k * wj]);
+                row_divergence(&f.qx[k * wj..], &f.qy[k * wj..], up, j, ga);
+                let duals = (&f.active[k * w..], &f.r[k * w * nb..]);
                 let rows = (
-                    &mut s.alpha[k * wj..(k + 1) * wj],
-                    &mut s.bar[k * wj..(k + 1) * wj],
+                    &mut f.alpha[k * wj..(k + 1) * wj],
+                    &mut f.bar[k * wj..(k + 1) * wj],
                 );
                 self.primal_at(yy, rows, ga, duals, t, tau);
             }
@@ -1531,22 +1537,16 @@ struct SweepTables<'a> {
     step: [f32; 4],
 }
 
-/// One strip of rows of the iterate and the duals, starting at row `y0`, with the first rows
-/// of ᾱ and α below it (as they were before the sweep; `None` for the last strip).
+/// One strip of rows of the iterate and the duals (`f`), starting at row `y0`, with the first
+/// rows of ᾱ and α below it (as they were before the sweep; `None` for the last strip).
 struct Strip<'a> {
     y0: usize,
-    alpha: &'a mut [f32],
-    bar: &'a mut [f32],
-    qx: &'a mut [f32],
-    qy: &'a mut [f32],
-    r: &'a mut [f32],
-    active: &'a mut [u8],
-    sums: &'a mut [f64],
+    f: StripFields<'a>,
     next_bar: Option<&'a [f32]>,
     next_alpha: Option<&'a [f32]>,
 }
 
-/// The state's fields a sweep cuts into strips.
+/// The state's fields a sweep cuts into strips (the whole state, or one strip of it).
 struct StripFields<'a> {
     alpha: &'a mut [f32],
     bar: &'a mut [f32],
@@ -1578,13 +1578,15 @@ impl<'a> Strip<'a> {
             .map(
                 |(s, ((((alpha, bar), (qx, qy)), (r, active)), sums))| Strip {
                     y0: s * rows,
-                    alpha,
-                    bar,
-                    qx,
-                    qy,
-                    r,
-                    active,
-                    sums,
+                    f: StripFields {
+                        alpha,
+                        bar,
+                        qx,
+                        qy,
+                        r,
+                        active,
+                        sums,
+                    },
                     next_bar: next(&halo.0, s),
                     next_alpha: next(&halo.1, s),
                 },
