@@ -2,6 +2,8 @@
 //! camera, then the DMD, then the wheel, exits with status 130, and leaves an OME-TIFF whose
 //! every page is a complete frame with its own record.
 
+mod common;
+
 use specmux_controller::ome;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -17,10 +19,7 @@ fn lines(path: &Path) -> Vec<serde_json::Value> {
 
 #[test]
 fn ctrl_c_stops_camera_dmd_wheel_and_keeps_a_readable_prefix() {
-    let scratch = tempfile::Builder::new()
-        .prefix("specmux-interrupt-")
-        .tempdir()
-        .unwrap();
+    let scratch = common::tmpdir("interrupt");
     let out = scratch.path().join("rec");
     let mut child = Command::new(env!("CARGO_BIN_EXE_specmux"))
         .args([

@@ -10,10 +10,7 @@ use tempfile::TempDir;
 
 /// A scratch folder's guard (it removes the folder on drop), an experiment file in it, its out/.
 fn setup(name: &str, scene: &str) -> (TempDir, PathBuf, PathBuf) {
-    let scratch = tempfile::Builder::new()
-        .prefix(&format!("specmux-cmd-{name}-"))
-        .tempdir()
-        .unwrap();
+    let scratch = common::tmpdir(&format!("cmd-{name}"));
     let dir = scratch.path();
     let file = dir.join("exp.toml");
     let text = format!(

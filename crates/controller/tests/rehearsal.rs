@@ -151,10 +151,7 @@ fn devices_are_driven_in_order_and_stopped_camera_dmd_wheel() {
 #[test]
 fn the_recording_reads_back_and_an_interrupted_one_keeps_its_prefix() {
     let exp = experiment("");
-    let scratch = tempfile::Builder::new()
-        .prefix("specmux-rec-")
-        .tempdir()
-        .unwrap();
+    let scratch = tmpdir("rec");
     let dir = scratch.path().join("rec");
     let (sim, _) = rig(&exp, &[]);
     let mut dev = sim.devices();

@@ -12,6 +12,15 @@ use specmux_controller::Result;
 use specmux_core::calibration::CalibrationFrames;
 use specmux_core::spectral::Library;
 use specmux_twin::{Experiment, Rig};
+use tempfile::TempDir;
+
+/// A fresh scratch folder `specmux-{tag}-*`, removed when the returned guard drops.
+pub fn tmpdir(tag: &str) -> TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("specmux-{tag}-"))
+        .tempdir()
+        .unwrap()
+}
 
 /// The shaded objects at 64 × 64 with the prototype's timing and camera, 4 exposures per
 /// calibration frame; `scene` adds keys to `[scene]`.
