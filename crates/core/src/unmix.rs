@@ -58,13 +58,19 @@ pub struct Unmixer {
     /// of H, so the dual method adds the band whose first step raises the objective most (13 %
     /// fewer steps on dead-leaves than with 1/‖b_k‖; docs/speed.md).
     b_inv_norm: Vec<f64>,
-    /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the dual active set's starting factor.
+    /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the GPU kernel's starting factor.
     linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
+    /// G = B H⁻¹ Bᵀ, row-major m × m: the band values' response to the multipliers (the dual
+    /// active set runs on it).
+    g_bands: Vec<f64>,
+    /// H⁻¹ b_kᵀ for each band k, band-major m × n: α = α_u + Σ μ_k H⁻¹ b_kᵀ.
+    hinv_bt: Vec<f64>,
     condition: f64,
 }
 
-/// The factored problem as plain tables, for another implementation of the same solver (the
-/// GPU backend's kernel): everything [`Unmixer::solve_pixel`] and the fast path read.
+/// The factored problem as plain tables, for another implementation of the same method (the
+/// GPU backend's kernel, which runs Goldfarb–Idnani in its textbook form on the factor L⁻ᵀ
+/// where [`Unmixer::solve_pixel`] runs it in band space): the same pivots, the same minimiser.
 pub struct UnmixTables<'a> {
     /// M = H⁻¹Fᵀ, row-major J × channels: α_unc = M x̂.
     pub unconstrained: &'a [f64],
@@ -185,6 +191,8 @@ impl Unmixer {
             }
         }
         let p = b * &mmat; // m × c
+        let hinv_bt = chol.solve(&b.transpose()); // n × m
+        let g_bands = b * &hinv_bt; // m × m
         let row_major = |a: &DMatrix<f64>| -> Vec<f64> {
             (0..a.nrows())
                 .flat_map(|i| (0..a.ncols()).map(move |j| a[(i, j)]))
@@ -214,6 +222,8 @@ impl Unmixer {
                 })
                 .collect(),
             linv_t,
+            g_bands: row_major(&g_bands),
+            hinv_bt: row_major(&hinv_bt.transpose()),
             condition,
         })
     }

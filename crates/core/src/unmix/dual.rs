@@ -1,8 +1,11 @@
 //! The dual active-set method of Goldfarb and Idnani (Math. Programming 27, 1983) for one pixel:
 //! min ½αᵀHα − gᵀα s.t. Bα ≥ 0. It starts at the unconstrained minimiser (already computed for
 //! the fast path) and adds the most violated band, dropping a band whose multiplier would turn
-//! negative, so a pixel with k binding bands takes about k steps. Each step updates the
-//! factorisation J = L⁻ᵀQ, JᵀN = [R; 0] (H = LLᵀ, N the active band rows) by Givens rotations.
+//! negative, so a pixel with k binding bands takes about k steps. It runs in band space: with
+//! G = B H⁻¹ Bᵀ the step moves the band values by G_·p − G_·A G_AA⁻¹ G_Ap and the multipliers by
+//! G_AA⁻¹ G_Ap, so a step costs two small triangular solves and one pass over the bands, and
+//! G_AA = LLᵀ gains a row per added band (one square root) where the factorisation J = L⁻ᵀQ of
+//! the textbook method needs a Givens rotation per free direction. α = α_u + H⁻¹B_Aᵀμ at the end.
 
 use crate::error::Error;
 use crate::error::Result;
@@ -13,85 +16,71 @@ use crate::unmix::MAX_BASIS;
 use crate::unmix::MAX_ITERATIONS;
 
 type Vector = [f64; MAX_BASIS];
-type Square = [Vector; MAX_BASIS];
 
-/// Relative size below which the primal step direction counts as zero (the new band depends
-/// on the active ones): ‖d₂‖² ≤ DEPENDENT·‖d‖².
+/// Relative size below which the step's curvature counts as zero (the new band depends on the
+/// active ones): G_pp − G_pA G_AA⁻¹ G_Ap ≤ DEPENDENT·G_pp.
 const DEPENDENT: f64 = 1e-13;
 
-fn dot(a: &Vector, b: &Vector) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
-}
-
-/// The Givens rotation (c, s, h) that takes (x, y) to (h, 0).
-fn givens(x: f64, y: f64) -> Option<(f64, f64, f64)> {
-    let h = (x * x + y * y).sqrt();
-    let inv = 1.0 / h;
-    (h > 0.0).then_some((x * inv, y * inv, h))
-}
-
-/// Rotate columns `a` and `b` of the column-major `m` by (c, s): a ← c·a + s·b, b ← c·b − s·a.
-fn rotate_columns(m: &mut Square, a: usize, b: usize, c: f64, s: f64) {
-    let (x, y) = (m[a], m[b]);
-    for i in 0..MAX_BASIS {
-        m[a][i] = c * x[i] + s * y[i];
-        m[b][i] = c * y[i] - s * x[i];
-    }
-}
-
-/// The working state of one solve.
-struct State {
-    /// J = L⁻ᵀQ (n × n, zero beyond), column-major: `j[col][row]`.
-    j: Square,
-    /// R, upper triangular q × q: `r[i][k]`, i ≤ k.
-    r: Square,
-    /// Active bands, in the order of R's columns.
-    active: [usize; MAX_BASIS],
-    /// Their multipliers.
-    u: [f64; MAX_BASIS],
+/// The working set: its bands, their multipliers and the Cholesky factor of G_AA.
+struct WorkingSet {
+    /// L, lower triangular q × q, row-major: `l[i][k]`, k ≤ i.
+    l: [Vector; MAX_BASIS],
+    bands: [usize; MAX_BASIS],
+    mu: Vector,
     q: usize,
 }
 
-impl State {
-    /// Add band `band` with multiplier `mu`, given d = Jᵀb_band: rotate d's tail into d[q].
-    fn add(&mut self, n: usize, d: &mut [f64; MAX_BASIS], band: usize, mu: f64) {
+impl WorkingSet {
+    /// r = G_AA⁻¹ g given g = G_Ap, and y = L⁻¹g (the new row of L if p is added).
+    fn solve(&self, g: &Vector) -> (Vector, Vector) {
         let q = self.q;
-        for i in (q + 1..n).rev() {
-            if let Some((c, s, h)) = givens(d[i - 1], d[i]) {
-                d[i - 1] = h;
-                d[i] = 0.0;
-                rotate_columns(&mut self.j, i - 1, i, c, s);
-            }
+        let mut y = [0.0; MAX_BASIS];
+        for i in 0..q {
+            let acc: f64 = (0..i).map(|k| self.l[i][k] * y[k]).sum();
+            y[i] = (g[i] - acc) / self.l[i][i];
         }
-        for i in 0..=q {
-            self.r[i][q] = d[i];
+        let mut r = [0.0; MAX_BASIS];
+        for i in (0..q).rev() {
+            let acc: f64 = (i + 1..q).map(|k| self.l[k][i] * r[k]).sum();
+            r[i] = (y[i] - acc) / self.l[i][i];
         }
-        self.active[q] = band;
-        self.u[q] = mu;
+        (r, y)
+    }
+
+    /// Add band `band` with multiplier `mu`: L's new row is y and √schur.
+    fn add(&mut self, band: usize, mu: f64, y: &Vector, schur: f64) {
+        let q = self.q;
+        self.l[q][..q].copy_from_slice(&y[..q]);
+        self.l[q][q] = schur.sqrt();
+        self.bands[q] = band;
+        self.mu[q] = mu;
         self.q += 1;
     }
 
-    /// Drop the active band at position `l`: remove R's column, restore the triangle by Givens
-    /// rotations of R's rows and the matching columns of J.
-    fn drop(&mut self, l: usize) {
+    /// Drop the band at position `at`: remove L's row, then Givens rotations of the columns
+    /// (which keep LLᵀ) restore the triangle.
+    fn drop(&mut self, at: usize) {
         let q = self.q;
-        for k in l..q - 1 {
-            for i in 0..=k + 1 {
-                self.r[i][k] = self.r[i][k + 1];
-            }
-            self.active[k] = self.active[k + 1];
-            self.u[k] = self.u[k + 1];
+        for i in at..q - 1 {
+            self.l[i] = self.l[i + 1];
+            self.bands[i] = self.bands[i + 1];
+            self.mu[i] = self.mu[i + 1];
         }
-        for i in l..q - 1 {
-            let Some((c, s, _)) = givens(self.r[i][i], self.r[i + 1][i]) else {
+        for i in at..q - 1 {
+            let (x, y) = (self.l[i][i], self.l[i][i + 1]);
+            let h = (x * x + y * y).sqrt();
+            if !(h > 0.0) {
                 continue;
-            };
-            for k in i..q - 1 {
-                let (a, b) = (self.r[i][k], self.r[i + 1][k]);
-                self.r[i][k] = c * a + s * b;
-                self.r[i + 1][k] = c * b - s * a;
             }
-            rotate_columns(&mut self.j, i, i + 1, c, s);
+            let (c, s) = (x / h, y / h);
+            for row in &mut self.l[i..q - 1] {
+                let (a, b) = (row[i], row[i + 1]);
+                row[i] = c * a + s * b;
+                row[i + 1] = c * b - s * a;
+            }
+        }
+        for row in &mut self.l[..q - 1] {
+            row[q - 1] = 0.0;
         }
         self.q -= 1;
     }
@@ -111,32 +100,18 @@ impl Unmixer {
         let (n, m) = (self.n, self.m);
         let scale = s[..m].iter().fold(0.0f64, |a, v| a.max(v.abs()));
         let tol = 1e-12 * scale;
-        let mut st = State {
-            j: self.linv_t,
-            r: [[0.0; MAX_BASIS]; MAX_BASIS],
-            active: [0; MAX_BASIS],
-            u: [0.0; MAX_BASIS],
+        let mut ws = WorkingSet {
+            l: [[0.0; MAX_BASIS]; MAX_BASIS],
+            bands: [0; MAX_BASIS],
+            mu: [0.0; MAX_BASIS],
             q: 0,
         };
-        let mut alpha = *au;
         let mut in_w = [false; MAX_BANDS];
         let mut iterations = 0;
-        loop {
-            // Step 1: the most violated band (values normalised by ‖b_k‖_{H⁻¹}), or optimal.
-            let mut p = None;
-            let mut worst = -tol;
-            for k in 0..m {
-                let v = s[k] * self.b_inv_norm[k];
-                if !in_w[k] && v < worst {
-                    worst = v;
-                    p = Some(k);
-                }
-            }
-            let Some(p) = p else { break };
-            // Row p of B, zero-padded for the fixed-size kernels.
-            let bp: &Vector = &std::array::from_fn(|j| self.bt.get(j).map_or(0.0, |c| c[p]));
+        while let Some(p) = self.most_violated(s, &in_w, tol) {
+            let gp = &self.g_bands[p * m..(p + 1) * m];
             let mut mu_p = 0.0;
-            // Step 2: move towards satisfying band p, dropping bands whose multiplier reaches 0.
+            // Move towards satisfying band p, dropping bands whose multiplier reaches 0.
             loop {
                 iterations += 1;
                 if iterations > MAX_ITERATIONS {
@@ -144,26 +119,16 @@ impl Unmixer {
                         "unmixing dual active set did not converge in {MAX_ITERATIONS} steps"
                     )));
                 }
-                let q = st.q;
-                let mut d: Vector = std::array::from_fn(|i| dot(&st.j[i], bp));
-                // Primal direction z = J₂d₂, dual direction rr = R⁻¹d₁.
-                let mut z = [0.0; MAX_BASIS];
-                for i in q..n {
-                    for (zl, jl) in z.iter_mut().zip(&st.j[i]) {
-                        *zl += jl * d[i];
-                    }
-                }
-                let mut rr = [0.0; MAX_BASIS];
-                for i in (0..q).rev() {
-                    let acc: f64 = (i + 1..q).map(|k| st.r[i][k] * rr[k]).sum();
-                    rr[i] = (d[i] - acc) / st.r[i][i];
-                }
+                let q = ws.q;
+                let g: Vector = std::array::from_fn(|i| if i < q { gp[ws.bands[i]] } else { 0.0 });
+                let (r, y) = ws.solve(&g);
+                let schur = gp[p] - y[..q].iter().map(|v| v * v).sum::<f64>();
                 // Partial step: the first active multiplier to reach zero.
                 let mut t1 = f64::INFINITY;
                 let mut drop = None;
                 for k in 0..q {
-                    if rr[k] > 0.0 {
-                        let t = st.u[k] / rr[k];
+                    if r[k] > 0.0 {
+                        let t = ws.mu[k] / r[k];
                         if t < t1 {
                             t1 = t;
                             drop = Some(k);
@@ -171,14 +136,10 @@ impl Unmixer {
                     }
                 }
                 // Full step: band p becomes exactly satisfied.
-                let dd = dot(&d, &d);
-                let d2: f64 = d[q..n].iter().map(|v| v * v).sum();
-                let zb = dot(&z, bp);
-                let sp = dot(bp, &alpha);
-                let t2 = if d2 <= DEPENDENT * dd || !(zb > 0.0) {
+                let t2 = if schur <= DEPENDENT * gp[p] || !(schur > 0.0) {
                     f64::INFINITY
                 } else {
-                    -sp / zb
+                    -s[p] / schur
                 };
                 // The smaller step wins; on a tie band p is added (its violation is gone).
                 let (t, drop) = if t1 < t2 { (t1, drop) } else { (t2, None) };
@@ -188,38 +149,109 @@ impl Unmixer {
                     ));
                 }
                 for k in 0..q {
-                    st.u[k] -= t * rr[k];
+                    ws.mu[k] -= t * r[k];
                 }
                 mu_p += t;
                 if t2.is_finite() {
-                    for (a, zl) in alpha.iter_mut().zip(&z) {
-                        *a += t * zl;
-                    }
+                    self.move_bands(s, t, gp, &ws, &r);
                 }
                 match drop {
-                    Some(l) => {
-                        in_w[st.active[l]] = false;
-                        st.drop(l);
+                    Some(k) => {
+                        in_w[ws.bands[k]] = false;
+                        ws.drop(k);
                     }
                     None => {
-                        st.add(n, &mut d, p, mu_p);
+                        ws.add(p, mu_p, &y, schur);
                         in_w[p] = true;
-                        if st.q == n {
-                            // n independent homogeneous constraints meet only at α = 0.
-                            alpha = [0.0; MAX_BASIS];
-                        }
                         break;
                     }
                 }
             }
-            self.spectrum(&alpha, s);
+            if ws.q == n {
+                // n independent homogeneous constraints meet only at α = 0.
+                s[..m].fill(0.0);
+                break;
+            }
         }
+        let alpha = self.alpha_from(au, &ws);
+        self.spectrum(&alpha, s);
         self.check_feasible(&alpha, s, scale)?;
         out_alpha.copy_from_slice(&alpha[..n]);
         info.iterations = iterations;
-        info.active = st.q;
-        info.bands[..st.q].copy_from_slice(&st.active[..st.q]);
-        info.multipliers[..st.q].copy_from_slice(&st.u[..st.q]);
+        info.active = ws.q;
+        info.bands[..ws.q].copy_from_slice(&ws.bands[..ws.q]);
+        info.multipliers[..ws.q].copy_from_slice(&ws.mu[..ws.q]);
         Ok(())
+    }
+
+    /// The band outside the working set with the largest violation normalised by
+    /// ‖b_k‖_{H⁻¹}, if it is beyond −`tol`: the normalised values and their minimum without
+    /// branches (four running minima), then the first band that attains it.
+    fn most_violated(
+        &self,
+        s: &[f64; MAX_BANDS],
+        in_w: &[bool; MAX_BANDS],
+        tol: f64,
+    ) -> Option<usize> {
+        let m = self.m;
+        let mut v = [0.0; MAX_BANDS];
+        for (k, (vk, (&sk, &w))) in v[..m]
+            .iter_mut()
+            .zip(s.iter().zip(&self.b_inv_norm))
+            .enumerate()
+        {
+            *vk = if in_w[k] { 0.0 } else { sk * w };
+        }
+        let mut lows = [-tol; 4];
+        for chunk in v[..m].chunks(4) {
+            for (low, &x) in lows.iter_mut().zip(chunk) {
+                *low = if x < *low { x } else { *low };
+            }
+        }
+        let low = lows.iter().fold(-tol, |a, &b| if b < a { b } else { a });
+        if !(low < -tol) {
+            return None;
+        }
+        v[..m].iter().position(|&x| x == low)
+    }
+
+    /// s += t·(G_·p − G_·A r): the band values along the step.
+    fn move_bands(
+        &self,
+        s: &mut [f64; MAX_BANDS],
+        t: f64,
+        gp: &[f64],
+        ws: &WorkingSet,
+        r: &Vector,
+    ) {
+        let m = self.m;
+        for (v, g) in s[..m].iter_mut().zip(gp) {
+            *v += t * g;
+        }
+        for (&band, &rk) in ws.bands[..ws.q].iter().zip(r) {
+            let f = t * rk;
+            for (v, g) in s[..m]
+                .iter_mut()
+                .zip(&self.g_bands[band * m..(band + 1) * m])
+            {
+                *v -= f * g;
+            }
+        }
+    }
+
+    /// α = α_u + H⁻¹ B_Aᵀ μ (0 when n bands are active).
+    fn alpha_from(&self, au: &[f64; MAX_BASIS], ws: &WorkingSet) -> [f64; MAX_BASIS] {
+        let n = self.n;
+        if ws.q == n {
+            return [0.0; MAX_BASIS];
+        }
+        let mut alpha = *au;
+        for (&band, &mu) in ws.bands[..ws.q].iter().zip(&ws.mu) {
+            let col = &self.hinv_bt[band * n..(band + 1) * n];
+            for (a, c) in alpha[..n].iter_mut().zip(col) {
+                *a += mu * c;
+            }
+        }
+        alpha
     }
 }
