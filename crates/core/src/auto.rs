@@ -22,7 +22,7 @@ pub struct Entry {
 /// (release build of commit 32be531, 768², the crop-0.25 square-window rows with the TV prior,
 /// on the 2-core build machine, idle before the run; docs/results.md, `method = "auto"`). It
 /// replaced the table of 2026-11-25, whose joint rows predate the one-sweep iteration and ran
-/// 1.2–1.5× slower than the code does now. Re-measure on the machine the budget is meant for
+/// 1.15–1.6× slower than the code does now. Re-measure on the machine the budget is meant for
 /// (`[reconstruct] auto_table`): this machine's speed varies by up to 1.6× between days.
 pub const TABLE: &[Entry] = &[
     Entry {
