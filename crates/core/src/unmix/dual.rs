@@ -168,8 +168,7 @@ impl Unmixer {
                 }
             }
             if ws.q == n {
-                // n independent homogeneous constraints meet only at α = 0.
-                s[..m].fill(0.0);
+                // n independent homogeneous constraints meet only at α = 0 (`alpha_from`).
                 break;
             }
         }
