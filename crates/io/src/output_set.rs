@@ -27,7 +27,13 @@ impl OutputSet {
         let notes = remove_stale(&parent, &name)?;
         let serial = SERIAL.fetch_add(1, Ordering::Relaxed);
         let staging = parent.join(format!(".{name}.staging-{}-{serial}", std::process::id()));
-        std::fs::create_dir(&staging).map_err(|e| Error::io(&staging, e))?;
+        std::fs::create_dir(&staging).map_err(|e| {
+            let why = format!(
+                "cannot create the staging folder {} beside it: {e}",
+                staging.display()
+            );
+            Error::io(target, std::io::Error::new(e.kind(), why))
+        })?;
         Ok(OutputSet {
             target: target.to_path_buf(),
             staging,
@@ -182,5 +188,22 @@ mod tests {
             set.notes
         );
         assert!(!d.join(".out.staging-0-0").exists());
+    }
+
+    /// A place where no folder can be made (/proc takes none): the error names the output
+    /// folder the user asked for first, then the staging folder that failed.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn an_output_where_no_folder_can_be_made_is_named() {
+        let err = OutputSet::begin(Path::new("/proc/specmux-out"))
+            .err()
+            .expect("/proc takes no new folder")
+            .to_string();
+        assert!(
+            err.starts_with(
+                "/proc/specmux-out: cannot create the staging folder /proc/.specmux-out.staging-"
+            ),
+            "{err}"
+        );
     }
 }
