@@ -86,7 +86,12 @@ pub fn with_values(base: &Experiment, set_to: &[(String, toml::Value)]) -> Resul
         msg: e.to_string(),
     })?;
     let label: Vec<String> = set_to.iter().map(|(k, v)| format!("{k}={v}")).collect();
-    Experiment::from_toml(&text, &format!("{} with {}", base.file, label.join(", ")))
+    let file = format!("{} with {}", base.file, label.join(", "));
+    // The line of a parse error is one of the generated document's, which the user never saw.
+    Experiment::from_toml(&text, &file).map_err(|e| match e {
+        Error::Toml { msg, .. } => Error::Toml { file, msg },
+        other => other,
+    })
 }
 
 /// Every combination of the swept values (the last key varies fastest).
@@ -256,5 +261,13 @@ mod tests {
         )
         .unwrap_err();
         assert!(err.to_string().contains("reconstruct.eta"), "{err}");
+        // A value of the wrong type: the sweep's label, without a line of the generated text.
+        let err = with_values(&base, &[("scene.size".into(), toml::Value::Integer(16))])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with(&format!("{} with scene.size=16: invalid type", base.file)),
+            "{err}"
+        );
     }
 }
