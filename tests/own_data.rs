@@ -506,3 +506,35 @@ fn reconstruct_warns_of_a_frame_under_its_noise() {
     assert!(report["mean_snr"].as_f64().unwrap() < 1.0, "{report}");
     assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
 }
+
+#[test]
+fn reconstruct_says_when_the_frame_overrides_the_experiments_size() {
+    let scratch = tmpdir("own-size");
+    let d = scratch.path();
+    let exp =
+        |n: usize| format!("[scene]\nsize = [{n}, {n}]\n[reconstruct.gap]\nmethod = \"fourier\"\n");
+    std::fs::write(d.join("e64.toml"), exp(64)).unwrap();
+    std::fs::write(d.join("e32.toml"), exp(32)).unwrap();
+    ok(d, &["simulate", "e64.toml", "--out", "sim"]);
+    let args = |e: &'static str| {
+        [
+            "reconstruct",
+            "sim/frame.exr",
+            "--experiment",
+            e,
+            "--out",
+            "out",
+        ]
+    };
+    let text = ok(d, &args("e32.toml"));
+    assert!(
+        text.contains("warning: e32.toml: scene.size = [32, 32], but the frame is 64×64: the frame's size is used"),
+        "{text}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("out/reconstruct.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
+    // The experiment that made the frame: nothing to say.
+    assert!(!ok(d, &args("e64.toml")).contains("scene.size"));
+}

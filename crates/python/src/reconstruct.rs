@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use specmux_core::noise::snr_warning;
 use specmux_core::reconstructor::Reconstructor;
-use specmux_report::commands::{frame_calibration, frame_experiment, Measured};
+use specmux_report::commands::{frame_calibration, frame_experiment, size_note, Measured};
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
 use std::ffi::CString;
@@ -43,6 +43,9 @@ pub fn reconstruct<'py>(
 ) -> PyResult<Bound<'py, PyAny>> {
     let raw_dn = is_integer(frame)?.then_some("frame (an integer array) is raw DN");
     let frame = to_frame(frame, "frame", None)?;
+    if let Some(w) = size_note(&exp.inner, &frame) {
+        PyErr::warn(py, &py.get_type::<PyUserWarning>(), &CString::new(w)?, 1)?;
+    }
     let e = frame_experiment(&exp.inner, &frame, raw_dn).map_err(err)?;
     let measured = calibration
         .map(|c| calibration::from_dict(c, frame.width, frame.height))

@@ -656,6 +656,7 @@ pub fn reconstruct(
     let frame = specmux_io::frame::read(frame_path)?;
     let raw_dn = specmux_io::frame::is_raw_dn(frame_path)
         .then(|| format!("{frame_name} is a 16-bit PNG of raw DN"));
+    let resized = size_note(&exp, &frame);
     let exp = frame_experiment(&exp, &frame, raw_dn.as_deref())?;
     let grid = exp.scene.grid(&exp.file)?;
     // Every input is read and checked before any work and any output.
@@ -687,9 +688,9 @@ pub fn reconstruct(
         say!(text, "auto: {}", choice.reason);
     }
     let mean_snr = recon.frame_snr(&frame)?;
-    let mut warnings: Vec<String> = mean_snr
-        .and_then(specmux_core::noise::snr_warning)
+    let mut warnings: Vec<String> = resized
         .into_iter()
+        .chain(mean_snr.and_then(specmux_core::noise::snr_warning))
         .collect();
     for w in &warnings {
         say!(text, "warning: {w}");
@@ -768,6 +769,18 @@ pub fn frame_experiment(
     exp.scene.size = [frame.width, frame.height];
     exp.validate()?;
     Ok(exp)
+}
+
+/// A note when the experiment wrote a `scene.size` the frame does not have: the frame's size is
+/// the one reconstructed ([`frame_experiment`]), which the user may not expect.
+pub fn size_note(exp: &Experiment, frame: &Cube) -> Option<String> {
+    let [w, h] = exp.scene.size;
+    (exp.wrote("scene.size") && [w, h] != [frame.width, frame.height]).then(|| {
+        format!(
+            "{}: scene.size = [{w}, {h}], but the frame is {}×{}: the frame's size is used",
+            exp.file, frame.width, frame.height
+        )
+    })
 }
 
 /// Calibration frames a user measured, with where they came from (`place`: a folder) and the
