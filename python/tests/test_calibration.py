@@ -136,3 +136,10 @@ def test_a_frame_under_its_noise_warns_and_reports_its_snr(camera):
     # Without a camera there is no noise model: no SNR, no warning.
     plain = experiment()
     assert specmux.reconstruct(plain, specmux.simulate(plain)["frame"], full=True)["mean_snr"] is None
+
+
+def test_a_frame_of_another_size_than_the_experiment_writes_warns():
+    frame = specmux.simulate(experiment(32))["frame"]
+    with pytest.warns(UserWarning, match=r"scene.size = \[64, 64\], but the frame is 32×32"):
+        cube = specmux.reconstruct(experiment(64), frame)
+    assert cube.shape[1:] == (32, 32)

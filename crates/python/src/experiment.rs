@@ -39,11 +39,15 @@ impl PyExperiment {
     #[pyo3(signature = (d, file = "<dict>"))]
     fn from_dict(py: Python<'_>, d: &Bound<'_, PyDict>, file: &str) -> PyResult<Self> {
         let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
-        let mut e: Experiment =
-            serde_json::from_str(&text).map_err(|x| err(format!("{file}: {x}")))?;
-        e.file = file.to_string();
-        e.validate().map_err(err)?;
-        Ok(PyExperiment { inner: e })
+        let bad = |x: &dyn std::fmt::Display| err(format!("{file}: {x}"));
+        // The structure is checked with serde_json's messages, then the dict is read as the same
+        // TOML file would be (which keys it wrote, an EXR scene's geometry, the auto table).
+        let value: serde_json::Value = serde_json::from_str(&text).map_err(|x| bad(&x))?;
+        serde_json::from_value::<Experiment>(value.clone()).map_err(|x| bad(&x))?;
+        let toml_text = toml::to_string(&without_nulls(value)).map_err(|x| bad(&x))?;
+        Ok(PyExperiment {
+            inner: Experiment::from_toml(&toml_text, file).map_err(err)?,
+        })
     }
 
     /// The built-in prototype (six-segment wheel, dead-leaves scene), optionally on another
@@ -103,5 +107,19 @@ impl PyExperiment {
             self.inner.scene.size[0],
             self.inner.scene.size[1]
         )
+    }
+}
+
+/// The value with every `null` member of an object left out: TOML has no null, and an absent
+/// key is what `None` (as `to_dict` writes it) means.
+fn without_nulls(v: serde_json::Value) -> serde_json::Value {
+    match v {
+        serde_json::Value::Object(m) => m
+            .into_iter()
+            .filter(|(_, x)| !x.is_null())
+            .map(|(k, x)| (k, without_nulls(x)))
+            .collect(),
+        serde_json::Value::Array(a) => a.into_iter().map(without_nulls).collect(),
+        other => other,
     }
 }
