@@ -48,6 +48,11 @@ fn refused(cwd: &Path, args: &[&str], must: &[&str]) -> String {
 }
 
 /// The PSNR printed on a line `against …: PSNR x dB`.
+/// A JSON file the run wrote.
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
 fn psnr(stdout: &str) -> f64 {
     let line = stdout.lines().find(|l| l.contains("PSNR")).expect(stdout);
     let after = line.split("PSNR ").nth(1).unwrap();
@@ -309,9 +314,7 @@ fn measured_calibration_frames_are_used_by_reconstruct() {
     ]);
     let tif = psnr(&ok(d, &[&a[..], &["--out", "tif"]].concat()));
     assert_eq!(tif, with, "TIFF {tif} dB against EXR {with} dB");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("with/reconstruct.json")).unwrap())
-            .unwrap();
+    let report = read_json(&d.join("with/reconstruct.json"));
     assert!(report["calibration"]["source"]
         .as_str()
         .unwrap()
@@ -431,8 +434,7 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
         String::from_utf8_lossy(&out.stderr)
     );
     let demo = work.join("out/demo");
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(demo.join("report.json")).unwrap()).unwrap();
+    let report = read_json(&demo.join("report.json"));
     assert_eq!(
         report["spectra"],
         format!("embedded (specmux {})", env!("CARGO_PKG_VERSION"))
@@ -467,9 +469,7 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let rec: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(work.join("rec/reconstruct.json")).unwrap())
-            .unwrap();
+    let rec = read_json(&work.join("rec/reconstruct.json"));
     assert_eq!(rec["spectra"], lib.display().to_string());
     check_schema("reconstruct.json", &rec);
 }
@@ -500,9 +500,7 @@ fn reconstruct_warns_of_a_frame_under_its_noise() {
         text.contains("warning: the frame's mean signal is"),
         "{text}"
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("out/reconstruct.json")).unwrap())
-            .unwrap();
+    let report = read_json(&d.join("out/reconstruct.json"));
     assert!(report["mean_snr"].as_f64().unwrap() < 1.0, "{report}");
     assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
 }
@@ -531,9 +529,7 @@ fn reconstruct_says_when_the_frame_overrides_the_experiments_size() {
         text.contains("warning: e32.toml: scene.size = [32, 32], but the frame is 64×64: the frame's size is used"),
         "{text}"
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(d.join("out/reconstruct.json")).unwrap())
-            .unwrap();
+    let report = read_json(&d.join("out/reconstruct.json"));
     assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
     // The experiment that made the frame: nothing to say.
     assert!(!ok(d, &args("e64.toml")).contains("scene.size"));
