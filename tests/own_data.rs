@@ -47,12 +47,12 @@ fn refused(cwd: &Path, args: &[&str], must: &[&str]) -> String {
     err
 }
 
-/// The PSNR printed on a line `against …: PSNR x dB`.
 /// A JSON file the run wrote.
 fn read_json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The PSNR printed on a line `against …: PSNR x dB`.
 fn psnr(stdout: &str) -> f64 {
     let line = stdout.lines().find(|l| l.contains("PSNR")).expect(stdout);
     let after = line.split("PSNR ").nth(1).unwrap();
