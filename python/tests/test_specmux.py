@@ -106,3 +106,10 @@ def test_from_file_and_dict(tmp_path):
     assert d.to_dict()["scene"]["size"] == [32, 32]
     with pytest.raises(specmux.SpecmuxError):
         specmux.Experiment.from_file(str(tmp_path / "missing.toml"))
+
+
+def test_to_dict_reads_back_to_the_same_experiment():
+    # The prototype's method is "auto": the counts it chooses are not written back.
+    for e in (specmux.Experiment.prototype(size=32), specmux.Experiment.from_dict({"rig": {"sensor": {}}})):
+        again = specmux.Experiment.from_dict(e.to_dict())
+        assert again.to_dict() == e.to_dict()

@@ -40,13 +40,12 @@ impl PyExperiment {
     fn from_dict(py: Python<'_>, d: &Bound<'_, PyDict>, file: &str) -> PyResult<Self> {
         let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
         let bad = |x: &dyn std::fmt::Display| err(format!("{file}: {x}"));
-        // The structure is checked with serde_json's messages, then the dict is read as the same
-        // TOML file would be (which keys it wrote, an EXR scene's geometry, the auto table).
+        // Read as the same TOML file would be (which keys it wrote, an EXR scene's geometry,
+        // the auto table).
         let value: serde_json::Value = serde_json::from_str(&text).map_err(|x| bad(&x))?;
-        serde_json::from_value::<Experiment>(value.clone()).map_err(|x| bad(&x))?;
-        let toml_text = toml::to_string(&without_nulls(value)).map_err(|x| bad(&x))?;
+        let doc = toml::Table::try_from(without_nulls(value)).map_err(|x| bad(&x))?;
         Ok(PyExperiment {
-            inner: Experiment::from_toml(&toml_text, file).map_err(err)?,
+            inner: Experiment::from_table(&doc, file).map_err(err)?,
         })
     }
 
@@ -93,9 +92,11 @@ impl PyExperiment {
         self.inner.scene.source.clone()
     }
 
-    /// The whole experiment as a dict (every key, defaults filled in).
+    /// The whole experiment as a dict (every key, defaults filled in) that `from_dict` reads
+    /// back to the same experiment: sections it lacks are absent, and with `method = "auto"`
+    /// the iteration counts auto chooses are left out unless they were written (`to_table`).
     fn to_dict(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
-        let text = serde_json::to_string(&self.inner).map_err(err)?;
+        let text = serde_json::to_string(&self.inner.to_table().map_err(err)?).map_err(err)?;
         Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
     }
 
@@ -111,7 +112,7 @@ impl PyExperiment {
 }
 
 /// The value with every `null` member of an object left out: TOML has no null, and an absent
-/// key is what `None` (as `to_dict` writes it) means.
+/// key is what `None` means.
 fn without_nulls(v: serde_json::Value) -> serde_json::Value {
     match v {
         serde_json::Value::Object(m) => m

@@ -81,17 +81,8 @@ pub fn with_values(base: &Experiment, set_to: &[(String, toml::Value)]) -> Resul
     for (k, v) in set_to {
         set(&mut doc, k, v.clone());
     }
-    let text = toml::to_string(&doc).map_err(|e| Error::Toml {
-        file: base.file.clone(),
-        msg: e.to_string(),
-    })?;
     let label: Vec<String> = set_to.iter().map(|(k, v)| format!("{k}={v}")).collect();
-    let file = format!("{} with {}", base.file, label.join(", "));
-    // The line of a parse error is one of the generated document's, which the user never saw.
-    Experiment::from_toml(&text, &file).map_err(|e| match e {
-        Error::Toml { msg, .. } => Error::Toml { file, msg },
-        other => other,
-    })
+    Experiment::from_table(&doc, &format!("{} with {}", base.file, label.join(", ")))
 }
 
 /// Every combination of the swept values (the last key varies fastest).

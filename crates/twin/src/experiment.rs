@@ -86,13 +86,32 @@ impl RigConfig {
 impl Experiment {
     /// Parse an experiment from TOML text; errors carry `file` and the line of the fault.
     pub fn from_toml(text: &str, file: &str) -> Result<Experiment> {
+        Experiment::from_text(text, file, true)
+    }
+
+    /// An experiment from a document built in code (a sweep's point, a Python dict), read as
+    /// the same file would be; a parse error names `file` alone, since the user never saw the
+    /// generated text whose line it would give.
+    pub fn from_table(doc: &toml::Table, file: &str) -> Result<Experiment> {
+        let text = toml::to_string(doc).map_err(|e| Error::Toml {
+            file: file.to_string(),
+            msg: e.to_string(),
+        })?;
+        Experiment::from_text(&text, file, false)
+    }
+
+    /// [`Experiment::from_toml`], a parse error's line given when `lines`.
+    fn from_text(text: &str, file: &str, lines: bool) -> Result<Experiment> {
         let mut e: Experiment = toml::from_str(text).map_err(|err| {
             let line = err
                 .span()
                 .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
                 .unwrap_or(0);
             Error::Toml {
-                file: format!("{file}:{line}"),
+                file: match lines {
+                    true => format!("{file}:{line}"),
+                    false => file.to_string(),
+                },
                 msg: err.message().replace('\n', " "),
             }
         })?;
