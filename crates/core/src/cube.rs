@@ -23,6 +23,17 @@ impl Cube {
         }
     }
 
+    /// A cube of zeros on memory advised onto huge pages ([`crate::pages`]), for a large output
+    /// written whole at once (the unmixed cube of a frame).
+    pub fn zeros_on_huge_pages(width: usize, height: usize, planes: usize) -> Cube {
+        Cube {
+            width,
+            height,
+            planes,
+            data: crate::pages::zeroed(width * height * planes),
+        }
+    }
+
     /// A cube from its data, checked for size.
     pub fn from_vec(width: usize, height: usize, planes: usize, data: Vec<f32>) -> Result<Cube> {
         if data.len() != width * height * planes {
@@ -127,13 +138,16 @@ impl Cube {
             .par_chunks_mut(self.pixels().max(1))
             .zip(m.par_iter())
             .for_each(|(dst, row)| {
-                for (j, &w) in row.iter().enumerate() {
-                    if w == 0.0 {
-                        continue;
-                    }
+                let terms = row.iter().enumerate().filter(|(_, &w)| w != 0.0);
+                for (k, (j, &w)) in terms.enumerate() {
                     let w = w as f32;
-                    for (d, s) in dst.iter_mut().zip(self.plane(j)) {
-                        *d += w * s;
+                    let src = dst.iter_mut().zip(self.plane(j));
+                    // The first term is written, not added to the zeros: a fresh page read
+                    // before its first write is mapped twice, the second time with a TLB
+                    // shootdown of every core (0.0 + w·s keeps the sum's bits).
+                    match k {
+                        0 => src.for_each(|(d, s)| *d = 0.0 + w * s),
+                        _ => src.for_each(|(d, s)| *d += w * s),
                     }
                 }
             });

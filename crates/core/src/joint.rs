@@ -561,7 +561,7 @@ impl Joint {
             qx: vec![0.0; n * j],
             qy: vec![0.0; n * j],
             active: vec![0; n],
-            r: vec![0.0; n * self.nbp],
+            r: crate::pages::zeroed(n * self.nbp),
             mat: Vec::new(),
             m: Vec::new(),
             tck: Vec::new(),

@@ -20,6 +20,7 @@ pub mod interrupt;
 pub mod joint;
 pub mod metrics;
 pub mod noise;
+pub mod pages;
 pub mod reconstructor;
 pub mod spectral;
 pub mod tv;

@@ -381,7 +381,7 @@ impl Unmixer {
     /// Bands of solved pixels are B α with the round-off left by the solver (≤ 1e-9 of the
     /// pixel's scale, checked) set to zero, so every output value is ≥ 0.
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
-        let mut out = Cube::zeros(xhat.width, xhat.height, self.m);
+        let mut out = Cube::zeros_on_huge_pages(xhat.width, xhat.height, self.m);
         let stats = self.unmix_into(xhat, &mut out)?;
         Ok((out, stats))
     }
