@@ -227,7 +227,9 @@ fn library_name(cat: &Library, lib: &Library, rel: &str) -> Result<String> {
 }
 
 /// Write each generated candidate of `chosen` as `<library>/<name>.csv` (the spectral CSV
-/// format of spectra/README.md), so the experiment can name it; measured ones are left alone.
+/// format of spectra/README.md), so the experiment can name it; measured ones, and generated
+/// ones the library already holds to the byte (as the embedded one holds spectra/design/), are
+/// left alone.
 pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathBuf>> {
     let mut written = Vec::new();
     for c in chosen {
@@ -237,6 +239,9 @@ pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathB
         );
         for (l, v) in c.curve.wavelengths().iter().zip(c.curve.values()) {
             text += &format!("{l:.1},{v:.6}\n");
+        }
+        if lib.holds(&c.name, &text) {
+            continue;
         }
         if lib.root().is_none() {
             let why = "the embedded spectral library is read-only: pass --spectra DIR (a copy of spectra/) to keep generated filters";
@@ -291,6 +296,25 @@ mod tests {
         let back = tmp.curve(&g[3].name).unwrap();
         assert!((back.eval(537.0) - g[3].curve.eval(537.0)).abs() < 1e-6);
         assert!(measured(&tmp, &tmp).unwrap().is_empty());
+    }
+
+    /// The embedded library holds the curves spectra/design/ keeps, so choosing one of them
+    /// writes nothing; a generated curve it does not hold is refused, naming `--spectra`.
+    #[test]
+    fn the_embedded_library_needs_no_write_of_a_curve_it_holds() {
+        let g = Families::default().generate("t").unwrap();
+        let held = g.iter().find(|c| c.name == "design/gauss-420-60").unwrap();
+        let embedded = Library::embedded();
+        assert!(write_generated(&[held], &embedded).unwrap().is_empty());
+        let odd = Families {
+            gaussian_fwhm_nm: vec![77.0],
+            ..Default::default()
+        };
+        let new = odd.generate("t").unwrap();
+        let e = write_generated(&[&new[0]], &embedded)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("--spectra") && e.contains("read-only"), "{e}");
     }
 
     #[test]

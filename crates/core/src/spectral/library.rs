@@ -94,6 +94,11 @@ impl Library {
         Ok((path, text))
     }
 
+    /// Whether the named table's file holds exactly `text` (false where there is none).
+    pub fn holds(&self, name: &str, text: &str) -> bool {
+        self.text(name).is_ok_and(|(_, t)| t == text)
+    }
+
     /// Read a named table with all its curves.
     pub fn table(&self, name: &str) -> Result<Table> {
         let (path, text) = self.text(name)?;
