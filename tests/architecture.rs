@@ -22,7 +22,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     (
         "core",
         &[
-            &["error"],
+            &["error", "pages"],
             &["cube", "spectral", "interrupt", "dead_leaves"],
             &["fft"],
             &["fft_backend"],
