@@ -23,7 +23,10 @@ pub fn files(paths: &[PathBuf], dir: &Path) -> Result<Vec<PathBuf>> {
         return Ok(paths.to_vec());
     }
     let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| Error::io(dir, e))?
+        .map_err(|e| {
+            let why = format!("cannot read this folder of experiment files ({e}): run from the repository root, or pass --scenes-dir DIR or --scenes FILE…");
+            Error::config("--scenes-dir", "scenes-dir", dir.display(), &why)
+        })?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .collect();
@@ -119,4 +122,28 @@ pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Outcome> {
         leak_db,
         seconds: rep.total_seconds,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A missing default folder (a run outside the repository) names the option and the folder.
+    #[test]
+    fn a_missing_scenes_folder_names_the_option() {
+        let e = files(&[], Path::new("no-such-scenes-dir"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("--scenes-dir")
+                && e.contains("no-such-scenes-dir")
+                && e.contains("--scenes FILE"),
+            "{e}"
+        );
+        let given = [PathBuf::from("a.toml")];
+        assert_eq!(
+            files(&given, Path::new("no-such-scenes-dir")).unwrap(),
+            given
+        );
+    }
 }
