@@ -151,9 +151,20 @@ fn built_in_scene_names_work_in_every_command_and_a_bad_size_names_the_flag() {
     let out = ok(d, &["simulate", "dead-leaves", "--explain"]);
     assert!(out.contains("scene"), "{out}");
     refused(d, &["simulate", "nope"], &["nope", "built-in scene"]);
+    // The default method and GAP-TV take any side; GAP's wavelet only sides it can split.
+    ok(d, &["demo", "--size", "100", "--out", "auto-100"]);
+    for (method, side) in [("gap-tv", "100"), ("gap", "96")] {
+        let file = format!("{method}.toml");
+        let toml = format!("[scene]\nsource = \"dead-leaves\"\n[reconstruct.gap]\nmethod = \"{method}\"\niterations = 2\n");
+        std::fs::write(d.join(&file), toml).unwrap();
+        ok(
+            d,
+            &["demo", "--scene", &file, "--size", side, "--out", method],
+        );
+    }
     refused(
         d,
-        &["demo", "--size", "100"],
+        &["demo", "--scene", "gap.toml", "--size", "100"],
         &["--size", "100", "96 or 112"],
     );
 }

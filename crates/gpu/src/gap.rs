@@ -77,9 +77,12 @@ impl GpuGap {
     ) -> Result<GpuGap> {
         let t = gap.tables();
         let cfg = t.config;
-        if !matches!(cfg.method, Method::Gap | Method::GapTv) {
+        if !matches!(
+            (cfg.method, t.dwt),
+            (Method::Gap, Some(_)) | (Method::GapTv, _)
+        ) {
             return Err(GpuError::Unsupported(format!(
-                "method {:?} in GAP (gap and gap-tv only)",
+                "method {:?} in GAP (gap with its wavelet and gap-tv only)",
                 cfg.method
             )));
         }
@@ -126,8 +129,9 @@ impl GpuGap {
                 &residuals,
             ),
         ];
-        let denoiser = match cfg.method {
-            Method::GapTv => Denoiser::Tv {
+        // The core builds the wavelet for GAP only: without it the method is GAP-TV.
+        let denoiser = match t.dwt {
+            None => Denoiser::Tv {
                 lambda: abs_sum(
                     ctx,
                     &module,
@@ -145,7 +149,7 @@ impl GpuGap {
                     cfg.tv_iterations,
                 ),
             },
-            _ => {
+            Some(dwt) => {
                 let beta = ctx.storage_init("gap beta", t.beta);
                 let scores = ctx.storage("gap scores", (npx * 4) as u64);
                 let select = gap
@@ -155,7 +159,7 @@ impl GpuGap {
                 let zero = ctx.storage("gap zero threshold", 4);
                 let threshold = select.as_ref().map_or(&zero, |s| s.result());
                 Denoiser::Wavelet {
-                    dwt: GpuDwt2::new(ctx, t.dwt, planes, estimate)?,
+                    dwt: GpuDwt2::new(ctx, dwt, planes, estimate)?,
                     score: Launch::new(
                         ctx,
                         &module,

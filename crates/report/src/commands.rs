@@ -60,8 +60,9 @@ pub fn experiment_for(scene: &str, size: Option<usize>) -> Result<Experiment> {
     Ok(exp)
 }
 
-/// `--size n` on a procedural scene; refused for a cube read from a file, and for a side that
-/// GAP's wavelet cannot split, with the nearest sides that it can.
+/// `--size n` on a procedural scene; refused for a cube read from a file, and, with `method =
+/// "gap"`, for a side that its wavelet cannot split, with the nearest sides that it can (the
+/// other methods take any side).
 fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     let refuse = |why: &str| Err(Error::config("--size", "size", n, why));
     let source = &exp.scene.source;
@@ -72,7 +73,7 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     check_count("--size", "size", n, sides, "pixels (as scene.size)")?;
     exp.scene.size = [n, n];
     let gap = &exp.reconstruct.gap;
-    if gap.method == specmux_core::gap::Method::Fourier {
+    if gap.method != specmux_core::gap::Method::Gap {
         return Ok(());
     }
     let fits = |m: usize| Dwt2::new(m, m, gap.levels, gap.wavelet, "").is_ok();
@@ -88,7 +89,7 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     .map(|m| m.to_string())
     .collect();
     refuse(&format!(
-        "GAP's wavelet (reconstruct.gap.levels = {}) splits only sides divisible by {}: try --size {}, or an experiment file with fewer levels or [reconstruct.gap] method = \"fourier\"",
+        "GAP's wavelet (reconstruct.gap.levels = {}) splits only sides divisible by {}: try --size {}, or an experiment file with fewer levels or another [reconstruct.gap] method",
         gap.levels,
         1usize << gap.levels,
         near.join(" or ")
