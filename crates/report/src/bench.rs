@@ -21,6 +21,7 @@ use specmux_core::joint::{Prior, WeightRule};
 use specmux_core::metrics;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
+use specmux_core::wavelet::Dwt2;
 use specmux_core::Cube;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
@@ -188,11 +189,15 @@ pub const REWEIGHT_ROUNDS: usize = 3;
 /// (docs/gpu.md) its `auto` table reaches past the CPU's 80.
 pub const GPU_JOINT_ITERATIONS: [usize; 3] = [160, 320, 640];
 
-/// The grid for `sim` on `device`: the default grid; on a hardware GPU the joint method at
+/// The grid for `sim` on `device`: the default grid (without GAP's rows where its wavelet
+/// cannot split the frame, [`gap_left_out`]); on a hardware GPU the joint method at
 /// [`GPU_JOINT_ITERATIONS`] too; and where the rig has a camera (a noise model) the joint
 /// method's noise-aware rows — weighted, and with the discrepancy λ — at 20, 40, 80 it.
 pub fn grid_for(sim: &Simulated, device: &Device) -> Vec<Setting> {
     let mut g = default_grid();
+    if gap_left_out(sim).is_some() {
+        g.retain(|s| s.method != Method::Gap);
+    }
     if device.is_hardware_gpu() {
         for iterations in GPU_JOINT_ITERATIONS {
             g.push(joint_setting(iterations, Prior::Tv, NoiseAware::Off));
@@ -206,6 +211,16 @@ pub fn grid_for(sim: &Simulated, device: &Device) -> Vec<Setting> {
         }
     }
     g
+}
+
+/// Why the bench leaves GAP's rows out for `sim`: its wavelet cannot split the frame's sides
+/// (the other methods take any side). None where it can.
+pub fn gap_left_out(sim: &Simulated) -> Option<String> {
+    let g = &sim.exp.reconstruct.gap;
+    let (w, h) = (sim.frame.width, sim.frame.height);
+    Dwt2::new(w, h, g.levels, g.wavelet, &sim.exp.file)
+        .err()
+        .map(|e| format!("GAP's rows left out (the other methods take any side): {e}"))
 }
 
 /// The joint method with `prior` and `noise` (crop 0.25, square window).
@@ -1152,6 +1167,30 @@ mod tests {
         assert_eq!(spots[0], (0.04, 17.0 - 0.075));
         assert!((spots[1].1 - spots[0].1).abs() >= h, "{spots:?}");
         assert_eq!(spots[2], (3.04, 22.0 - 0.075));
+    }
+
+    #[test]
+    fn a_frame_the_wavelet_cannot_split_leaves_only_gaps_rows_out() {
+        let sim = tiny();
+        assert_eq!(gap_left_out(&sim), None);
+        let mut exp = sim.exp.clone();
+        exp.scene.size = [40, 40];
+        let odd = simulate(&exp, &Library::default_root()).unwrap();
+        let why = gap_left_out(&odd).unwrap();
+        assert!(
+            why.contains("reconstruct.gap.levels") && why.contains("40×40"),
+            "{why}"
+        );
+        let grid = grid_for(&odd, &Device::cpu());
+        let kept = |m: Method| grid.iter().filter(|s| s.method == m).count();
+        let all = |m: Method| default_grid().iter().filter(|s| s.method == m).count();
+        assert_eq!(kept(Method::Gap), 0);
+        for m in [Method::Fourier, Method::GapTv, Method::Joint] {
+            assert_eq!(kept(m), all(m), "{m:?}");
+        }
+        let gap_tv = grid.iter().find(|s| s.method == Method::GapTv).unwrap();
+        let rows = work_precision(&odd, &[*gap_tv], 1).unwrap();
+        assert!(rows[0].psnr_db.is_finite(), "{rows:?}");
     }
 
     #[test]

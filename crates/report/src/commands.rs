@@ -254,6 +254,9 @@ pub fn bench(
         sim.frame.height,
         device.describe()
     );
+    if let Some(why) = crate::bench::gap_left_out(&sim) {
+        say!(text, "{why}");
+    }
     let rows = crate::bench::work_precision_on(
         &device,
         &sim,
