@@ -167,6 +167,17 @@ fn built_in_scene_names_work_in_every_command_and_a_bad_size_names_the_flag() {
         &["demo", "--scene", "gap.toml", "--size", "100"],
         &["--size", "100", "96 or 112"],
     );
+    // The crop sweep runs GAP beside the Fourier estimate unless told not to.
+    let sweep = [
+        "sweep-crop",
+        "dead-leaves",
+        "--size",
+        "40",
+        "--out",
+        "sweep",
+    ];
+    refused(d, &sweep, &["reconstruct.gap.levels", "40×40", "--no-gap"]);
+    ok(d, &[&sweep[..], &["--no-gap"]].concat());
 }
 
 /// A 48 × 32 cube of 16 bands 450–600 nm, channels named as specmux names them.

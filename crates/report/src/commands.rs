@@ -300,6 +300,15 @@ pub fn sweep_crop(
             method: specmux_core::gap::Method::Gap,
             ..exp.reconstruct.gap.clone()
         };
+        let (w, h) = (sim.frame.width, sim.frame.height);
+        if !no_gap && Dwt2::new(w, h, cfg.levels, cfg.wavelet, "").is_err() {
+            return Err(Error::config(
+                &exp.file,
+                "reconstruct.gap.levels",
+                cfg.levels,
+                &format!("GAP's wavelet cannot split a {w}×{h} frame: --no-gap sweeps the Fourier estimate alone"),
+            ));
+        }
         let name = Path::new(scene)
             .file_stem()
             .map_or(scene.clone(), |s| s.to_string_lossy().into_owned());
