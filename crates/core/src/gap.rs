@@ -83,6 +83,12 @@ impl Default for GapConfig {
 }
 
 impl GapConfig {
+    /// GAP's wavelet transform of a `w` × `h` frame: an error naming `reconstruct.gap.levels`
+    /// in `file` where the levels cannot split it (GAP-TV and the other methods take any side).
+    pub fn wavelet_for(&self, w: usize, h: usize, file: &str) -> Result<Dwt2> {
+        Dwt2::new(w, h, self.levels, self.wavelet, file)
+    }
+
     /// Range checks; errors name `reconstruct.gap.<field>` and the value.
     pub fn validate(&self, file: &str) -> Result<()> {
         let key = |f: &str| format!("reconstruct.gap.{f}");
@@ -217,7 +223,7 @@ impl Gap {
             ));
         }
         let dwt = (cfg.method == Method::Gap)
-            .then(|| Dwt2::new(w, h, cfg.levels, cfg.wavelet, file))
+            .then(|| cfg.wavelet_for(w, h, file))
             .transpose()?;
         let energy: Vec<f64> = (0..n)
             .map(|p| {

@@ -21,7 +21,6 @@ use specmux_core::joint::{Prior, WeightRule};
 use specmux_core::metrics;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
-use specmux_core::wavelet::Dwt2;
 use specmux_core::Cube;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
@@ -216,9 +215,9 @@ pub fn grid_for(sim: &Simulated, device: &Device) -> Vec<Setting> {
 /// Why the bench leaves GAP's rows out for `sim`: its wavelet cannot split the frame's sides
 /// (the other methods take any side). None where it can.
 pub fn gap_left_out(sim: &Simulated) -> Option<String> {
-    let g = &sim.exp.reconstruct.gap;
     let (w, h) = (sim.frame.width, sim.frame.height);
-    Dwt2::new(w, h, g.levels, g.wavelet, &sim.exp.file)
+    let gap = &sim.exp.reconstruct.gap;
+    gap.wavelet_for(w, h, &sim.exp.file)
         .err()
         .map(|e| format!("GAP's rows left out (the other methods take any side): {e}"))
 }

@@ -5,7 +5,6 @@ use specmux_core::error::check_count;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::{Grid, Library};
 use specmux_core::unmix::UnmixStats;
-use specmux_core::wavelet::Dwt2;
 use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
@@ -76,7 +75,7 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     if gap.method != specmux_core::gap::Method::Gap {
         return Ok(());
     }
-    let fits = |m: usize| Dwt2::new(m, m, gap.levels, gap.wavelet, "").is_ok();
+    let fits = |m: usize| gap.wavelet_for(m, m, "").is_ok();
     if fits(n) {
         return Ok(());
     }
@@ -301,7 +300,7 @@ pub fn sweep_crop(
             ..exp.reconstruct.gap.clone()
         };
         let (w, h) = (sim.frame.width, sim.frame.height);
-        if !no_gap && Dwt2::new(w, h, cfg.levels, cfg.wavelet, "").is_err() {
+        if !no_gap && cfg.wavelet_for(w, h, "").is_err() {
             return Err(Error::config(
                 &exp.file,
                 "reconstruct.gap.levels",
