@@ -137,24 +137,29 @@ fn dim_frames_warning(rows: &[ReconstructedFrame]) -> String {
 }
 
 /// The table of per-frame results (the SNR column: `Reconstructor::frame_snr`), a warning for
-/// frames under their noise, and a summary line of the clean frames.
+/// frames under their noise, and a summary line of the clean frames. "-" marks a figure the
+/// frame has nothing for (no truth, no noise model); "undefined" a SAM with a truth but no
+/// non-zero spectrum to measure.
 pub fn frame_table(rows: &[ReconstructedFrame]) -> String {
-    let show = |v: Option<f64>, p: usize| metrics::show(v, p);
+    let absent = || "-".to_string();
     let mut t = format!(
         "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9} {:>7}\n",
         "frame", "t (s)", "flags", "PSNR dB", "SSIM", "SAM °", "recon s", "SNR"
     );
     for r in rows {
+        // PSNR is defined whenever there is a truth.
+        let error =
+            |v: Option<f64>, p: usize| r.psnr_db.map_or_else(absent, |_| metrics::show(v, p));
         t += &format!(
             "{:>6} {:>10.6} {:>6} {:>9} {:>7} {:>9} {:>9.4} {:>7}\n",
             r.frame_id,
             r.timestamp_s,
             r.flags,
-            show(r.psnr_db, 2),
-            show(r.ssim, 4),
-            show(r.sam_deg, 2),
+            error(r.psnr_db, 2),
+            error(r.ssim, 4),
+            error(r.sam_deg, 2),
             r.reconstruction_s,
-            show(r.mean_snr, 1)
+            r.mean_snr.map_or_else(absent, |v| format!("{v:.1}"))
         );
     }
     t += &dim_frames_warning(rows);
@@ -176,9 +181,9 @@ pub fn frame_table(rows: &[ReconstructedFrame]) -> String {
             });
         t += &format!(
             "cube PSNR mean {} dB (min {lo:.2}, max {hi:.2}), SSIM {}, SAM {}°; ",
-            show(mean(psnr.clone()), 2),
-            show(mean(clean.iter().filter_map(|r| r.ssim).collect()), 4),
-            show(mean(clean.iter().filter_map(|r| r.sam_deg).collect()), 2),
+            metrics::show(mean(psnr.clone()), 2),
+            metrics::show(mean(clean.iter().filter_map(|r| r.ssim).collect()), 4),
+            metrics::show(mean(clean.iter().filter_map(|r| r.sam_deg).collect()), 2),
         );
     }
     t += &format!("reconstruction {time:.4} s/frame\n");
@@ -316,5 +321,30 @@ mod tests {
             "{t}"
         );
         assert!(!frame_table(&rows[1..3]).contains("warning"));
+    }
+
+    /// Without a truth or a noise model the figures are "-"; with a truth a SAM over zero
+    /// spectra alone is "undefined".
+    #[test]
+    fn absent_figures_are_dashes_and_an_undefined_angle_says_so() {
+        let cells = |r: &ReconstructedFrame| -> Vec<String> {
+            let t = frame_table(std::slice::from_ref(r));
+            t.lines()
+                .nth(1)
+                .unwrap()
+                .split_whitespace()
+                .map(String::from)
+                .collect()
+        };
+        assert_eq!(cells(&row(1, None))[3..], ["-", "-", "-", "0.1000", "-"]);
+        let judged = ReconstructedFrame {
+            psnr_db: Some(21.5),
+            ssim: Some(0.5),
+            ..row(2, Some(3.0))
+        };
+        assert_eq!(
+            cells(&judged)[3..],
+            ["21.50", "0.5000", "undefined", "0.1000", "3.0"]
+        );
     }
 }
