@@ -29,7 +29,7 @@ pub enum Command {
     /// Run an experiment end to end (default: the 2019 prototype on the dead-leaves scene),
     /// print the error of every stage against the truth and its run time, write the files.
     Demo {
-        /// A built-in scene (dead-leaves, shaded-objects) or an experiment file.
+        /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
         #[arg(long, default_value = "dead-leaves")]
         scene: String,
         /// Override the frame size (square), e.g. 256 for a quick look.
@@ -61,7 +61,7 @@ pub enum Command {
     /// (stdout, JSON, Markdown) and a plot of final-cube PSNR against median run time with the
     /// Pareto front.
     Bench {
-        /// A built-in scene (dead-leaves, shaded-objects) or an experiment file.
+        /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
         experiment: String,
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
@@ -95,7 +95,7 @@ pub enum Command {
     /// Run an experiment over a grid of values of its keys and tabulate the error of each run
     /// against the truth, e.g. `--vary rig.sensor.electrons_at_full_scale=10;100;1000`.
     Sweep {
-        /// A built-in scene (dead-leaves, shaded-objects) or an experiment file.
+        /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
         experiment: String,
         /// KEY=V1;V2;… (TOML values; a bare word is a string). Repeat for a Cartesian grid.
         #[arg(long, required = true)]
