@@ -59,7 +59,7 @@ fn flags(estimate: &Cube, (lo, hi): (f32, f32), sam_undefined: usize) -> Vec<Str
 
 /// Compare an estimate with the truth (same shape).
 pub fn compare(truth: &Cube, estimate: &Cube) -> Result<Metrics> {
-    truth.check_same_shape(estimate, "estimate against truth")?;
+    estimate.check_same_shape(truth, "estimate against truth")?;
     let (t, e) = (value_range(&truth.data), value_range(&estimate.data));
     let (Some((_, peak)), Some(est_range)) = (t, e) else {
         return Err(Error::Numerical(
@@ -533,7 +533,14 @@ mod tests {
         assert!(compare(&nan, &nan).is_err());
         let inf = cube(4, 4, 1, |i| if i == 5 { f32::NEG_INFINITY } else { 1.0 });
         assert!(compare(&inf, &t).is_err() && compare(&t, &inf).is_err());
-        assert!(compare(&t, &cube(4, 2, 1, |_| 0.0)).is_err());
+        // The shapes in the order the message names them: the estimate's, then the truth's.
+        let e = compare(&t, &cube(4, 2, 1, |_| 0.0))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("estimate against truth: 4×2×1 against 4×4×1"),
+            "{e}"
+        );
         let m = compare(&t, &t).unwrap();
         assert_eq!(m.exact_planes, 1);
         assert!(m.psnr_db.is_infinite() && m.ssim == 1.0);
