@@ -257,7 +257,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            err.starts_with(&format!("{} with scene.size=16: invalid type", base.file)),
+            err.starts_with(&format!(
+                "{} with scene.size=16: `scene.size` = 16: invalid type",
+                base.file
+            )),
             "{err}"
         );
     }

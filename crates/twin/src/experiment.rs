@@ -102,19 +102,8 @@ impl Experiment {
 
     /// [`Experiment::from_toml`], a parse error's line given when `lines`.
     fn from_text(text: &str, file: &str, lines: bool) -> Result<Experiment> {
-        let mut e: Experiment = toml::from_str(text).map_err(|err| {
-            let line = err
-                .span()
-                .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1)
-                .unwrap_or(0);
-            Error::Toml {
-                file: match lines {
-                    true => format!("{file}:{line}"),
-                    false => file.to_string(),
-                },
-                msg: err.message().replace('\n', " "),
-            }
-        })?;
+        let mut e: Experiment = serde_path_to_error::deserialize(toml::Deserializer::new(text))
+            .map_err(|err| parse_error(&err, text, file, lines))?;
         e.file = file.to_string();
         e.written = text.parse().unwrap_or_default();
         if e.scene.source.starts_with("exr:") {
@@ -318,6 +307,57 @@ impl Experiment {
     }
 }
 
+/// A parse error of an experiment's text naming the file (and the line, when `lines`), the key
+/// where it arose and the value written there (the key alone where the document cannot be read
+/// as TOML or has no value there).
+fn parse_error(
+    err: &serde_path_to_error::Error<toml::de::Error>,
+    text: &str,
+    file: &str,
+    lines: bool,
+) -> Error {
+    let inner = err.inner();
+    let line = inner
+        .span()
+        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+    let file = match (lines, line) {
+        (true, Some(line)) => format!("{file}:{line}"),
+        _ => file.to_string(),
+    };
+    let reason = inner.message().replace('\n', " ");
+    let path = err.path().to_string();
+    if path == "." {
+        return Error::Toml { file, msg: reason };
+    }
+    let written = text.parse::<toml::Table>().ok();
+    let msg = match written.as_ref().and_then(|t| value_at(t, err.path())) {
+        Some(v) => format!("`{path}` = {v}: {reason}"),
+        None => format!("`{path}`: {reason}"),
+    };
+    Error::Toml { file, msg }
+}
+
+/// The value of `table` at a deserializer's `path` (tables by key, arrays by index).
+fn value_at<'a>(
+    table: &'a toml::Table,
+    path: &serde_path_to_error::Path,
+) -> Option<&'a toml::Value> {
+    use serde_path_to_error::Segment;
+    let mut segments = path.iter();
+    let mut value = match segments.next()? {
+        Segment::Map { key } => table.get(key)?,
+        _ => return None,
+    };
+    for segment in segments {
+        value = match segment {
+            Segment::Map { key } => value.as_table()?.get(key)?,
+            Segment::Seq { index } => value.as_array()?.get(*index)?,
+            _ => return None,
+        };
+    }
+    Some(value)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -348,6 +388,41 @@ mod tests {
         assert!(e.to_string().contains("scene.wavelengths_nm[2]"), "{e}");
         let e = Experiment::from_toml("[reconstruct]\ncrop = 0.3\n", "t.toml").unwrap_err();
         assert!(e.to_string().contains("overlap"), "{e}");
+    }
+
+    /// A value serde cannot read is named by its file and line, its key path and what was
+    /// written; a document built in code (a sweep, a Python dict) by its name, key and value.
+    #[test]
+    fn unreadable_values_name_the_line_the_key_and_the_value() {
+        let err = |text: &str| {
+            Experiment::from_toml(text, "t.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            err("[scene]\nseed = 1\nsize = [64]\n"),
+            "t.toml:3: `scene.size` = [64]: invalid length 1, expected an array of length 2"
+        );
+        let e = err("[rig.wheel]\nfilters = [\"wheel/red\", 7]\n");
+        assert!(
+            e.starts_with("t.toml:2: `rig.wheel.filters[1]` = 7: invalid type"),
+            "{e}"
+        );
+        let e = err("[scne]\nsize = 3\n");
+        assert!(
+            e.starts_with("t.toml:1: `scne` = { size = 3 }: unknown field"),
+            "{e}"
+        );
+        // Not TOML at all: the file, the line and the parser's words.
+        assert!(err("[scene\n").starts_with("t.toml:1: "));
+        let doc: toml::Table = "[scene]\nseed = -1\n".parse().unwrap();
+        let e = Experiment::from_table(&doc, "<dict>")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("<dict>: `scene.seed` = -1: invalid value"),
+            "{e}"
+        );
     }
 
     #[test]
