@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 use specmux_core::spectral::{Curve, Library};
 use specmux_core::{Error, Result};
+use specmux_twin::experiment::read_toml;
 use std::path::{Path, PathBuf};
 
 /// Provenance prefix of the curves this module writes; such files are not read back as
@@ -93,10 +94,7 @@ impl Families {
     /// Read a families file.
     pub fn load(path: &Path) -> Result<Families> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-        let f: Families = toml::from_str(&text).map_err(|e| Error::Toml {
-            file: path.display().to_string(),
-            msg: e.message().replace('\n', " "),
-        })?;
+        let f: Families = read_toml(&text, &path.display().to_string(), true)?;
         f.validate(&path.display().to_string())?;
         Ok(f)
     }
@@ -296,6 +294,23 @@ mod tests {
         let back = tmp.curve(&g[3].name).unwrap();
         assert!((back.eval(537.0) - g[3].curve.eval(537.0)).abs() < 1e-6);
         assert!(measured(&tmp, &tmp).unwrap().is_empty());
+    }
+
+    /// A families file's unreadable value is named by file, line, key and value.
+    #[test]
+    fn a_families_file_names_the_key_it_cannot_read() {
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-fam-")
+            .tempdir()
+            .unwrap();
+        let path = scratch.path().join("families.toml");
+        std::fs::write(&path, "peak = 0.9\ngaussian_fwhm_nm = [60, \"wide\"]\n").unwrap();
+        let e = Families::load(&path).unwrap_err().to_string();
+        let want = format!(
+            "{}:2: `gaussian_fwhm_nm[1]` = \"wide\": invalid type",
+            path.display()
+        );
+        assert!(e.starts_with(&want), "{e}");
     }
 
     /// The embedded library holds the curves spectra/design/ keeps, so choosing one of them

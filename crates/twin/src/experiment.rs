@@ -102,8 +102,7 @@ impl Experiment {
 
     /// [`Experiment::from_toml`], a parse error's line given when `lines`.
     fn from_text(text: &str, file: &str, lines: bool) -> Result<Experiment> {
-        let mut e: Experiment = serde_path_to_error::deserialize(toml::Deserializer::new(text))
-            .map_err(|err| parse_error(&err, text, file, lines))?;
+        let mut e: Experiment = read_toml(text, file, lines)?;
         e.file = file.to_string();
         e.written = text.parse().unwrap_or_default();
         if e.scene.source.starts_with("exr:") {
@@ -307,7 +306,15 @@ impl Experiment {
     }
 }
 
-/// A parse error of an experiment's text naming the file (and the line, when `lines`), the key
+/// `T` from TOML `text`; an error names `file` (and the line, when `lines`: text the user
+/// wrote), the key path where it arose and the value written there. Also for the design tools'
+/// files.
+pub fn read_toml<T: serde::de::DeserializeOwned>(text: &str, file: &str, lines: bool) -> Result<T> {
+    serde_path_to_error::deserialize(toml::Deserializer::new(text))
+        .map_err(|err| parse_error(&err, text, file, lines))
+}
+
+/// A parse error of a TOML text naming the file (and the line, when `lines`), the key
 /// where it arose and the value written there (the key alone where the document cannot be read
 /// as TOML or has no value there).
 fn parse_error(
