@@ -43,7 +43,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "io",
         &[
             &["atomic"],
-            &["exr", "png", "json", "output_set", "npy"],
+            &["exr", "png", "json", "output_set", "npy", "toml_file"],
             &["frame"],
         ],
     ),

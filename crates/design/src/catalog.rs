@@ -6,7 +6,7 @@
 use serde::{Deserialize, Serialize};
 use specmux_core::spectral::{Curve, Library};
 use specmux_core::{Error, Result};
-use specmux_twin::experiment::read_toml;
+use specmux_io::toml_file::read_toml;
 use std::path::{Path, PathBuf};
 
 /// Provenance prefix of the curves this module writes; such files are not read back as
