@@ -21,8 +21,10 @@ use std::time::Instant;
 pub mod discrepancy;
 mod lane;
 mod pnp;
+mod rows;
 
-use lane::{Lane, LaneKernel, Lanes, Portable, LANES};
+use lane::{fields, LaneKernel, Lanes, Scalar, LANES};
+use rows::Rows;
 
 /// τσ‖K‖² of the step sizes: below the bound 1 of Chambolle–Pock's convergence theorem.
 const STEP_PRODUCT: f64 = 0.98;
@@ -337,6 +339,8 @@ pub struct Joint {
     w: usize,
     h: usize,
     j: usize,
+    /// The layout of the iteration's fields (`rows.rs`).
+    rows: Rows,
     cfg: JointConfig,
     /// The experiment file, named by an error that surfaces during a run.
     file: String,
@@ -345,9 +349,8 @@ pub struct Joint {
     /// βB by columns, each padded with zeros to `nbp` (a multiple of 8) bands, so the
     /// per-pixel products run over whole vector lanes.
     bcol: Vec<f32>,
-    /// βB by rows, one lane each (J coefficients, zero-padded), `nbp` rows: Bᵀr as a sum of
-    /// rows.
-    brow: Vec<Lane>,
+    /// βB by rows (J coefficients, zero-padded), one per band: the band values βBα and Bᵀr.
+    bmat: Vec<[f32; MAX_J]>,
     nbp: usize,
     /// The spectral prior P in the joint's units (P·mean‖a‖²/‖F‖²_F), J × J.
     eq: DMatrix<f64>,
@@ -357,30 +360,35 @@ pub struct Joint {
     basis: DMatrix<f64>,
     /// (min_k, max_k) of each column of βB: the cheap feasibility bound of `surely_feasible`.
     col_range: Vec<(f32, f32)>,
-    /// The same bound as two lanes (min_k and max_k per column, zero-padded).
-    col_lo: Lane,
-    col_hi: Lane,
+    /// The same bound by column (min_k and max_k, zero-padded).
+    col_lo: [f32; MAX_J],
+    col_hi: [f32; MAX_J],
     mean_a_norm: f64,
 }
 
-/// The iterate, the dual variables and the per-frame tables of one run.
+/// The iterate, the dual variables and the per-frame tables of one run. The fields the
+/// iteration sweeps are in `rows.rs`' layout (`Rows`); the frame's are w × h.
+#[derive(Clone)]
 pub struct JointState {
-    /// α, pixel-major.
-    pub alpha: Vec<f32>,
+    rows: Rows,
+    j: usize,
+    /// Padded bands of `JointTables`, for [`JointState::duals`].
+    nbp: usize,
+    /// α (J a pixel).
+    alpha: Vec<f32>,
     bar: Vec<f32>,
-    /// TV dual, pixel-major: qx and qy, J per pixel each.
+    /// TV dual: qx and qy, J a pixel each.
     qx: Vec<f32>,
     qy: Vec<f32>,
     /// 1 where the constraint dual r is non-zero somewhere in the pixel's bands.
     active: Vec<u8>,
-    /// Constraint dual r ≤ 0, pixel-major (bands per pixel).
+    /// Constraint dual r ≤ 0 (banded: [`Rows::band`]).
     r: Vec<f32>,
-    /// Proximal tables: M = (I + τη'Q)⁻¹ (its J columns, a lane each), m_p = M a_p (J per
-    /// pixel), t_p = τω_p y_p, c_p = τω_p / (1 + τω_p a_pᵀm_p), k_p = a_pᵀ m_p and the cap
-    /// (below).
-    mat: Vec<Lane>,
+    /// Proximal tables: M = (I + τη'Q)⁻¹, m_p = M a_p (J a pixel), and (t_p = τω_p y_p,
+    /// c_p = τω_p / (1 + τω_p a_pᵀm_p), k_p = a_pᵀ m_p, the cap below) (4 a pixel).
+    mat: Mat,
     m: Vec<f32>,
-    tck: Vec<[f32; 4]>,
+    tck: Vec<f32>,
     y: Vec<f32>,
     /// The data weights over their mean (so the spectral prior's balance against the data and
     /// λ's scale do not depend on the weights' units), and that mean.
@@ -388,7 +396,8 @@ pub struct JointState {
     omega_scale: f64,
     /// y_p where the pixel is saturated (a fit a_pᵀα ≥ y_p costs nothing there), else +∞.
     cap: Vec<f32>,
-    /// Per-pixel TV weights (1 unless reweighted): the TV term is λ Σ_p w_p ‖∇α(p)‖.
+    /// Per-pixel TV weights (1 unless reweighted; one a pixel, in rows): the TV term is
+    /// λ Σ_p w_p ‖∇α(p)‖.
     tvw: Vec<f32>,
     pub lambda: f32,
     pub tau: f32,
@@ -482,6 +491,7 @@ impl Joint {
             w,
             h,
             j,
+            rows: Rows::new(w, h),
             cfg: cfg.clone(),
             a,
             bcol: (0..j)
@@ -495,9 +505,9 @@ impl Joint {
                     })
                 })
                 .collect(),
-            brow: (0..nbp)
+            bmat: (0..bands)
                 .map(|k| {
-                    std::array::from_fn(|jj| match k < bands && jj < j {
+                    std::array::from_fn(|jj| match jj < j {
                         true => (beta * basis[(k, jj)]) as f32,
                         false => 0.0,
                     })
@@ -554,22 +564,26 @@ impl Joint {
                 .collect(),
             None => vec![f32::INFINITY; n],
         };
-        let alpha = to_pixel_major(seed);
+        let rows = self.rows;
+        let alpha = rows.planes_to_rows(&seed.data, j);
         let mut st = JointState {
+            rows,
+            j,
+            nbp: self.nbp,
             bar: alpha.clone(),
             alpha,
-            qx: vec![0.0; n * j],
-            qy: vec![0.0; n * j],
-            active: vec![0; n],
-            r: crate::pages::zeroed(n * self.nbp),
-            mat: Vec::new(),
+            qx: vec![0.0; rows.len(j)],
+            qy: vec![0.0; rows.len(j)],
+            active: vec![0; rows.len(1)],
+            r: crate::pages::zeroed(rows.len(self.bmat.len())),
+            mat: [[0.0; MAX_J]; MAX_J],
             m: Vec::new(),
             tck: Vec::new(),
             y: frame.data.clone(),
             omega,
             omega_scale,
             cap,
-            tvw: vec![1.0; n],
+            tvw: vec![1.0; rows.len(1)],
             lambda: lambda as f32,
             tau: 0.0,
             sigma: 0.0,
@@ -600,8 +614,9 @@ impl Joint {
     /// λ, the steps for the balance s = mean|α|/λ of the current α (τ = ratio·s/L,
     /// σ = 1/(ratio·s·L)) and the proximal tables for the new τ; the duals and ᾱ are kept.
     fn balance_steps(&self, st: &mut JointState, lambda: f64) -> Result<()> {
-        let mean_alpha =
-            st.alpha.iter().map(|v| v.abs() as f64).sum::<f64>() / st.alpha.len() as f64;
+        // The padding's zeros add nothing to the sum.
+        let mean_alpha = st.alpha.iter().map(|v| v.abs() as f64).sum::<f64>()
+            / (self.w * self.h * self.j) as f64;
         let scale = if lambda > 0.0 && mean_alpha > 0.0 {
             mean_alpha / lambda
         } else {
@@ -609,27 +624,28 @@ impl Joint {
         };
         let tau = self.cfg.step_ratio * scale * STEP_PRODUCT.sqrt() / self.norm_k;
         let sigma = STEP_PRODUCT.sqrt() / (self.cfg.step_ratio * scale * self.norm_k);
-        (st.mat, st.m, st.tck) = self.prox_tables(tau, st)?;
-        (st.lambda, st.tau, st.sigma) = (lambda as f32, tau as f32, sigma as f32);
+        let (mat, m, tck) = self.prox_tables(tau, st)?;
+        st.m = self.rows.pixel_major_to_rows(&m, self.j);
+        st.tck = self.rows.pixel_major_to_rows(tck.as_flattened(), 4);
+        (st.mat, st.lambda, st.tau, st.sigma) = (mat, lambda as f32, tau as f32, sigma as f32);
         Ok(())
     }
 
     /// The proximal tables of τ for `st`'s frame, weights and caps: M = (I + τη'Q)⁻¹,
-    /// m_p = M a_p and (τω_p y_p, τω_p/(1 + τω_p k_p), k_p = a_pᵀm_p, cap_p) per pixel.
-    #[allow(clippy::type_complexity)]
-    fn prox_tables(
-        &self,
-        tau: f64,
-        st: &JointState,
-    ) -> Result<(Vec<Lane>, Vec<f32>, Vec<[f32; 4]>)> {
+    /// m_p = M a_p and (τω_p y_p, τω_p/(1 + τω_p k_p), k_p = a_pᵀm_p, cap_p) per pixel, both
+    /// pixel-major.
+    fn prox_tables(&self, tau: f64, st: &JointState) -> Result<(Mat, Vec<f32>, Vec<[f32; 4]>)> {
         let (y, omega) = (&st.y, &st.omega);
         let (j, n) = (self.j, self.w * self.h);
-        let mat = (DMatrix::identity(j, j) + tau * &self.eq)
+        let inv = (DMatrix::identity(j, j) + tau * &self.eq)
             .try_inverse()
             .ok_or_else(|| Error::Numerical("joint: I + τη'Q is singular".into()))?;
-        let cols: Vec<Lane> = (0..j)
-            .map(|c| std::array::from_fn(|r| if r < j { mat[(r, c)] as f32 } else { 0.0 }))
-            .collect();
+        let mat: Mat = std::array::from_fn(|r| {
+            std::array::from_fn(|c| match r < j && c < j {
+                true => inv[(r, c)] as f32,
+                false => 0.0,
+            })
+        });
         let mut m = vec![0.0f32; n * j];
         let mut tck = vec![[0.0f32; 4]; n];
         m.par_chunks_mut(j)
@@ -638,29 +654,41 @@ impl Joint {
             .zip(y.par_iter().zip(omega.par_iter()).zip(&st.cap))
             .for_each(|(((mp, t), ap), ((&y, &om), &cap))| {
                 let k = with_basis_len!(j, J => {
-                    let a = Portable::load::<J>(ap);
-                    let ma = Portable::mat_vec::<J>(&cols, a);
-                    Portable::store::<J>(mp, ma);
-                    Portable::sum(Portable::mul(a, ma))
+                    let a: [f32; J] = std::array::from_fn(|c| ap[c]);
+                    let ma = mat_vec::<J, Scalar>(&mat, a);
+                    mp.copy_from_slice(&ma);
+                    Scalar::tree_sum::<J>(std::array::from_fn(|c| a[c] * ma[c]))
                 });
                 let tw = tau as f32 * om;
                 *t = [tw * y, tw / (1.0 + tw * k), k, cap];
             });
-        Ok((cols, m, tck))
+        Ok((mat, m, tck))
     }
 
     /// Σ_p ω_p r_p² (r_p the data residual, one-sided where saturated) and the number of
     /// pixels with ω_p > 0.
     pub fn weighted_residual(&self, st: &JointState) -> (f64, usize) {
-        let j = self.j;
+        let (w, j, wp) = (self.w, self.j, self.rows.wp);
         let sum = st
             .alpha
-            .par_chunks(j)
-            .zip(self.a.par_chunks(j))
-            .zip(st.y.par_iter().zip(st.omega.par_iter()).zip(&st.cap))
-            .map(|((al, ap), ((&y, &om), &cap))| {
-                let fit: f64 = al.iter().zip(ap).map(|(u, v)| *u as f64 * *v as f64).sum();
-                om as f64 * data_residual(y, fit, cap).powi(2)
+            .par_chunks(self.rows.row_len(j))
+            .zip(self.a.par_chunks(w * j))
+            .zip(
+                st.y.par_chunks(w)
+                    .zip(st.omega.par_chunks(w))
+                    .zip(st.cap.par_chunks(w)),
+            )
+            .map(|((al, ar), ((y, om), cap))| {
+                let pixels = ar.chunks_exact(j).zip(y.iter().zip(om).zip(cap));
+                let mut sum = 0.0;
+                for (x, (ap, ((&y, &om), &cap))) in pixels.enumerate() {
+                    let fit: f64 = pixel_values(al, wp, j, x)
+                        .zip(ap)
+                        .map(|(u, v)| u as f64 * *v as f64)
+                        .sum();
+                    sum += om as f64 * data_residual(y, fit, cap).powi(2);
+                }
+                sum
             })
             .sum::<f64>();
         (
@@ -690,7 +718,8 @@ impl Joint {
     /// The same bits for any `rows` (1: every dual update, then every primal one). With `cost`,
     /// returns the objective at α before the step.
     fn sweep(&self, st: &mut JointState, cost: bool, rows: usize) -> f64 {
-        let wj = self.w * self.j;
+        let (wp, nb) = (self.rows.wp, self.bmat.len());
+        let rl = self.rows.row_len(self.j);
         let tables = SweepTables {
             data: DataTerm {
                 y: &st.y,
@@ -707,9 +736,9 @@ impl Joint {
             tau: st.tau,
         };
         let halo = (
-            first_rows(&st.bar, wj, rows),
+            first_rows(&st.bar, rl, rows),
             match cost {
-                true => first_rows(&st.alpha, wj, rows),
+                true => first_rows(&st.alpha, rl, rows),
                 false => Vec::new(),
             },
         );
@@ -722,29 +751,28 @@ impl Joint {
             active: &mut st.active,
             sums: &mut st.row_sums,
         };
-        let strips = Strip::split(fields, (self.w, self.j, self.nbp), rows, &halo);
+        let strips = Strip::split(fields, (wp, self.j, nb), rows, &halo);
         strips.into_par_iter().for_each_init(
-            || (vec![0.0f32; wj], vec![0.0f32; wj]),
+            || (vec![0.0f32; rl], vec![0.0f32; rl]),
             |scratch, strip| self.strip_pass(strip, &tables, cost, scratch),
         );
-        let (w, nb) = (self.w, self.nbp);
         let (qx, qy, active, r) = (&st.qx, &st.qy, &st.active, &st.r);
         st.alpha
-            .par_chunks_mut(rows * wj)
-            .zip(st.bar.par_chunks_mut(rows * wj))
+            .par_chunks_mut(rows * rl)
+            .zip(st.bar.par_chunks_mut(rows * rl))
             .enumerate()
             .for_each_init(
-                || vec![0.0f32; wj],
+                || vec![0.0f32; rl],
                 |div, (s, (alpha, bar))| {
                     let yy = s * rows;
                     let duals = RowDuals {
-                        qx: &qx[yy * wj..],
-                        qy: &qy[yy * wj..],
-                        up: row_above(qy, wj, yy),
-                        active: &active[yy * w..],
-                        r: &r[yy * w * nb..],
+                        qx: &qx[yy * rl..],
+                        qy: &qy[yy * rl..],
+                        up: row_above(qy, rl, yy),
+                        active: &active[yy * wp..],
+                        r: &r[yy * wp * nb..],
                     };
-                    let rows = (&mut alpha[..wj], &mut bar[..wj]);
+                    let rows = (&mut alpha[..rl], &mut bar[..rl]);
                     self.primal_at(yy, rows, duals, &tables, div);
                 },
             );
@@ -760,7 +788,7 @@ impl Joint {
         cost: bool,
         (ga, gb): &mut (Vec<f32>, Vec<f32>),
     ) {
-        let (w, j, nb, wj) = (self.w, self.j, self.nbp, self.w * self.j);
+        let (wp, nb, rl) = (self.rows.wp, self.bmat.len(), self.rows.row_len(self.j));
         let (sigma, lambda, flush) = (t.sigma, t.lambda, t.flush);
         let Strip {
             y0,
@@ -771,24 +799,24 @@ impl Joint {
         for k in 0..f.sums.len() {
             let yy = y0 + k;
             if cost {
-                let next = f.alpha.get((k + 1) * wj..(k + 2) * wj).or(next_alpha);
+                let next = f.alpha.get((k + 1) * rl..(k + 2) * rl).or(next_alpha);
                 f.sums[k] = self.row_cost(
-                    (&f.alpha[k * wj..(k + 1) * wj], next),
+                    (&f.alpha[k * rl..(k + 1) * rl], next),
                     &t.data,
                     lambda,
                     yy,
                     (ga, gb),
                 );
             }
-            let next = f.bar.get((k + 1) * wj..(k + 2) * wj).or(next_bar);
-            let bar = &f.bar[k * wj..(k + 1) * wj];
-            row_gradients((bar, next), j, ga, gb);
+            let next = f.bar.get((k + 1) * rl..(k + 2) * rl).or(next_bar);
+            let bar = &f.bar[k * rl..(k + 1) * rl];
+            row_gradients((bar, next), self.rows, ga, gb);
             let row = DualRow {
-                qx: &mut f.qx[k * wj..(k + 1) * wj],
-                qy: &mut f.qy[k * wj..(k + 1) * wj],
-                r: &mut f.r[k * w * nb..(k + 1) * w * nb],
-                active: &mut f.active[k * w..(k + 1) * w],
-                weight: &t.data.tvw[yy * w..(yy + 1) * w],
+                qx: &mut f.qx[k * rl..(k + 1) * rl],
+                qy: &mut f.qy[k * rl..(k + 1) * rl],
+                r: &mut f.r[k * wp * nb..(k + 1) * wp * nb],
+                active: &mut f.active[k * wp..(k + 1) * wp],
+                weight: &t.data.tvw[yy * wp..(yy + 1) * wp],
             };
             let step = DualStep {
                 gx: ga,
@@ -797,18 +825,18 @@ impl Joint {
                 lambda,
                 flush,
             };
-            with_basis_len!(j, J => lane::dispatch(DualKernel::<J> { joint: self, row, bar, step }));
+            with_basis_len!(self.j, J => lane::dispatch(DualKernel::<J> { joint: self, row, bar, step }));
             if k > 0 {
                 let duals = RowDuals {
-                    qx: &f.qx[k * wj..],
-                    qy: &f.qy[k * wj..],
-                    up: Some(&f.qy[(k - 1) * wj..k * wj]),
-                    active: &f.active[k * w..],
-                    r: &f.r[k * w * nb..],
+                    qx: &f.qx[k * rl..],
+                    qy: &f.qy[k * rl..],
+                    up: Some(&f.qy[(k - 1) * rl..k * rl]),
+                    active: &f.active[k * wp..],
+                    r: &f.r[k * wp * nb..],
                 };
                 let rows = (
-                    &mut f.alpha[k * wj..(k + 1) * wj],
-                    &mut f.bar[k * wj..(k + 1) * wj],
+                    &mut f.alpha[k * rl..(k + 1) * rl],
+                    &mut f.bar[k * rl..(k + 1) * rl],
                 );
                 self.primal_at(yy, rows, duals, t, ga);
             }
@@ -825,44 +853,30 @@ impl Joint {
         t: &SweepTables<'_>,
         div: &mut [f32],
     ) {
-        let (w, j, nb) = (self.w, self.j, self.nbp);
-        row_divergence(d.qx, d.qy, d.up, j, div);
-        let px = yy * w..(yy + 1) * w;
+        let (j, wp, nb) = (self.j, self.rows.wp, self.bmat.len());
+        row_divergence(d.qx, d.qy, d.up, self.rows, div);
         let row = PrimalRow {
             alpha,
             bar,
             div,
-            active: &d.active[..w],
-            r: &d.r[..w * nb],
-            m: &t.m[px.start * j..px.end * j],
-            tck: &t.tck[px],
+            active: &d.active[..wp],
+            r: &d.r[..wp * nb],
+            m: &t.m[yy * wp * j..(yy + 1) * wp * j],
+            tck: &t.tck[yy * wp * 4..(yy + 1) * wp * 4],
         };
         with_basis_len!(j, J => lane::dispatch(PrimalKernel::<J> { joint: self, row, mat: t.mat, tau: t.tau }));
     }
 
-    /// βBα on the padded bands, a block of `LANES` bands at a time (the columns summed in
-    /// order); the blocks past the padded bands stay 0.
+    /// Bit l set where pixel l of `alpha` has min_k Σ_j βB_kj α_j ≥ 0 by the per-column
+    /// extremes of βB alone.
     #[inline(always)]
-    fn basis_times<const J: usize, L: Lanes>(&self, alpha: &Lane) -> [L::V; MAX_BANDS / LANES] {
-        let nb = self.nbp;
-        let mut u = [L::splat(0.0); MAX_BANDS / LANES];
-        for (k, uk) in u[..nb / LANES].iter_mut().enumerate() {
-            for (col, &a) in self.bcol.chunks_exact(nb).zip(&alpha[..J]) {
-                *uk = L::add(
-                    *uk,
-                    L::mul(L::load::<LANES>(&col[k * LANES..]), L::splat(a)),
-                );
-            }
-        }
-        u
-    }
-
-    /// True when min_k Σ_j βB_kj α_j ≥ 0 follows from the per-column extremes of βB alone.
-    #[inline(always)]
-    fn surely_feasible<L: Lanes>(&self, alpha: L::V) -> bool {
-        let low = L::mul(alpha, L::load::<LANES>(&self.col_lo));
-        let high = L::mul(alpha, L::load::<LANES>(&self.col_hi));
-        L::sum(L::select_nonneg(alpha, low, high)) >= 0.0
+    fn surely_feasible<const J: usize, L: Lanes>(&self, alpha: [L::V; J]) -> u32 {
+        let zero = L::splat(0.0);
+        L::nonneg_bits(L::tree_sum::<J>(fields!(L, J, |c| {
+            let low = L::mul(alpha[c], L::splat(self.col_lo[c]));
+            let high = L::mul(alpha[c], L::splat(self.col_hi[c]));
+            L::select_ge(alpha[c], zero, low, high)
+        })))
     }
 
     /// Row `yy`'s share of the objective Σ ½ω(y − aᵀα)² + ½αᵀη'Qα + λ‖∇α‖, in f64 in pixel
@@ -876,15 +890,15 @@ impl Joint {
         (gx, gy): (&mut [f32], &mut [f32]),
     ) -> f64 {
         let (w, j) = (self.w, self.j);
-        row_gradients((alpha, next), j, gx, gy);
+        row_gradients((alpha, next), self.rows, gx, gy);
         let px = yy * w..(yy + 1) * w;
         let row = CostRow {
             alpha,
             a: &self.a[px.start * j..px.end * j],
             y: &data.y[px.clone()],
             om: &data.om[px.clone()],
-            cap: &data.cap[px.clone()],
-            tvw: &data.tvw[px],
+            cap: &data.cap[px],
+            tvw: &data.tvw[yy * self.rows.wp..],
             gx,
             gy,
         };
@@ -894,129 +908,163 @@ impl Joint {
     /// [`Joint::row_cost`] with J fixed per compiled copy.
     #[inline(always)]
     fn row_cost_j<const J: usize>(&self, row: CostRow<'_>, lambda: f32) -> f64 {
+        let wp = self.rows.wp;
         let eq: [[f64; J]; J] = std::array::from_fn(|r| std::array::from_fn(|c| self.eq[(r, c)]));
-        let pixels = row.alpha.chunks_exact(J).zip(row.a.chunks_exact(J));
-        let grads = row.gx.chunks_exact(J).zip(row.gy.chunks_exact(J));
+        let at = |v: &[f32], x: usize| -> [f32; J] { std::array::from_fn(|c| v[c * wp + x]) };
         let data = row.y.iter().zip(row.om).zip(row.cap.iter().zip(row.tvw));
         let mut sum = 0.0;
-        for (((alpha, a), (gx, gy)), ((&y, &om), (&cap, &wp))) in pixels.zip(grads).zip(data) {
-            let fit: f64 = a
-                .iter()
-                .zip(alpha)
-                .map(|(u, v)| *u as f64 * *v as f64)
-                .sum();
+        for ((x, a), ((&y, &om), (&cap, &tw))) in row.a.chunks_exact(J).enumerate().zip(data) {
+            let alpha = at(row.alpha, x);
+            let fit: f64 = a.iter().zip(alpha).map(|(u, v)| *u as f64 * v as f64).sum();
             let mut quad = 0.0;
             for (r, er) in eq.iter().enumerate() {
                 for (c, e) in er.iter().enumerate() {
                     quad += alpha[r] as f64 * e * alpha[c] as f64;
                 }
             }
-            let g2: f64 = gx.iter().chain(gy).map(|&g| (g as f64).powi(2)).sum();
+            let (gx, gy) = (at(row.gx, x), at(row.gy, x));
+            let g2: f64 = gx.iter().chain(&gy).map(|&g| (g as f64).powi(2)).sum();
             let r = data_residual(y, fit, cap);
-            sum += 0.5 * om as f64 * r * r + 0.5 * quad + (lambda * wp) as f64 * g2.sqrt();
+            sum += 0.5 * om as f64 * r * r + 0.5 * quad + (lambda * tw) as f64 * g2.sqrt();
         }
         sum
     }
 
     /// The dual update of one row given ∇ᾱ there (gx, gy): q ← P_{‖·‖≤λ}(q + σ∇ᾱ) per pixel
     /// and r by [`Joint::constraint_dual`], each result t stored relaxed as t + (γ − 1)(t − old).
-    /// J is the basis length, fixed per compiled copy, and `L` the lanes a pixel's J
-    /// coefficients and its bands are computed in.
+    /// J is the basis length, fixed per compiled copy, and `L` the lanes: `L::WIDTH` pixels
+    /// at a time.
     #[inline(always)]
     fn dual_row<const J: usize, L: Lanes>(&self, row: DualRow<'_>, bar: &[f32], step: DualStep) {
-        let (nb, over) = (self.nbp, self.cfg.relaxation as f32 - 1.0);
-        let DualStep {
-            gx,
-            gy,
-            sigma,
-            lambda,
-            flush,
-        } = step;
-        let pixels = row.qx.chunks_exact_mut(J).zip(row.qy.chunks_exact_mut(J));
-        let grads = gx.chunks_exact(J).zip(gy.chunks_exact(J));
-        let rest = bar
-            .chunks_exact(J)
-            .zip(row.r.chunks_exact_mut(nb))
-            .zip(row.active.iter_mut().zip(row.weight));
-        for (((qx, qy), (gx, gy)), ((bp, rp), (act, &wp))) in pixels.zip(grads).zip(rest) {
-            let (ox, oy) = (L::load::<J>(qx), L::load::<J>(qy));
-            let tx = L::add_scaled(ox, sigma, L::load::<J>(gx));
-            let ty = L::add_scaled(oy, sigma, L::load::<J>(gy));
-            let n2 = L::sum(L::add(L::mul(tx, tx), L::mul(ty, ty)));
-            let f = L::splat(ball_factor(n2, lambda * wp));
-            L::store::<J>(qx, relaxed::<L>(ox, L::mul(tx, f), over));
-            L::store::<J>(qy, relaxed::<L>(oy, L::mul(ty, f), over));
-            let bl = L::load::<J>(bp);
-            if *act == 0 && self.surely_feasible::<L>(bl) {
+        let wp = self.rows.wp;
+        let over = L::splat(self.cfg.relaxation as f32 - 1.0);
+        let (sigma, lambda) = (L::splat(step.sigma), L::splat(step.lambda));
+        for x in (0..wp).step_by(L::WIDTH) {
+            let (ox, oy) = (
+                L::load_fields::<J>(row.qx, wp, x),
+                L::load_fields::<J>(row.qy, wp, x),
+            );
+            let (gx, gy) = (
+                L::load_fields::<J>(step.gx, wp, x),
+                L::load_fields::<J>(step.gy, wp, x),
+            );
+            let tx = fields!(L, J, |c| L::add_scaled(ox[c], sigma, gx[c]));
+            let ty = fields!(L, J, |c| L::add_scaled(oy[c], sigma, gy[c]));
+            let n2 = L::tree_sum::<J>(fields!(L, J, |c| {
+                L::add(L::mul(tx[c], tx[c]), L::mul(ty[c], ty[c]))
+            }));
+            let f = ball_factor::<L>(n2, L::mul(lambda, L::load(&row.weight[x..])));
+            let qx = fields!(L, J, |c| relaxed::<L>(ox[c], L::mul(tx[c], f), over));
+            let qy = fields!(L, J, |c| relaxed::<L>(oy[c], L::mul(ty[c], f), over));
+            L::store_fields(row.qx, wp, x, qx);
+            L::store_fields(row.qy, wp, x, qy);
+            let bl = L::load_fields::<J>(bar, wp, x);
+            let live = L::load_flags(&row.active[x..]);
+            let idle = !live & self.surely_feasible::<J, L>(bl) & L::ALL;
+            if idle == L::ALL || (live == 0 && self.all_bands_nonneg::<J, L>(bl)) {
+                // r = 0 and βBᾱ ≥ 0 at every pixel: r stays 0 (not touched).
                 continue;
             }
-            self.constraint_dual::<J, L>(L::to_array(bl), rp, act, (sigma, over, flush));
+            let dual = ConstraintStep {
+                idle,
+                sigma,
+                over,
+                flush: step.flush,
+            };
+            let live = self.constraint_dual::<J, L>(bl, (row.r, x), dual);
+            L::store_flags(&mut row.active[x..], live);
         }
     }
 
-    /// r ← min(r + σβBᾱ, 0) of one pixel, relaxed, with the values under the flush threshold
-    /// set to 0, and its flag (r ≠ 0 somewhere). A pixel with r = 0 and βBᾱ ≥ 0 in every band
-    /// would keep r = 0 exactly, so its r is not touched.
+    /// Band k's value βB_kᾱ of `bl`, its products summed in column order.
+    #[inline(always)]
+    fn band_value<const J: usize, L: Lanes>(b: &[f32; MAX_J], bl: &[L::V; J]) -> L::V {
+        let mut v = L::splat(0.0);
+        for (&bc, &a) in b[..J].iter().zip(bl) {
+            v = L::add(v, L::mul(L::splat(bc), a));
+        }
+        v
+    }
+
+    /// True when every band value βB_kᾱ of every pixel of `bl` is ≥ 0 (or NaN, as `min0`).
+    #[inline(always)]
+    fn all_bands_nonneg<const J: usize, L: Lanes>(&self, bl: [L::V; J]) -> bool {
+        let mut low = L::splat(0.0);
+        for b in &self.bmat {
+            low = L::add(low, L::min0(Self::band_value::<J, L>(b, &bl)));
+        }
+        L::nonzero_bits(low) == 0
+    }
+
+    /// r ← min(r + σβBᾱ, 0) at pixels x.. of a row's r ([`Rows::band`]), relaxed, with the
+    /// values under the flush threshold set to 0; the `idle` pixels (r = 0 and βBᾱ ≥ 0 by
+    /// `surely_feasible`) keep r = 0. Returns the bits of the pixels whose r is non-zero.
     #[inline(always)]
     fn constraint_dual<const J: usize, L: Lanes>(
         &self,
-        bl: Lane,
-        rp: &mut [f32],
-        act: &mut u8,
-        (sigma, over, flush): (f32, f32, f32),
-    ) {
-        let u = self.basis_times::<J, L>(&bl);
-        if *act == 0 && u.iter().all(|&uk| L::nonzero(L::min0(uk)) == 0) {
-            return;
+        bl: [L::V; J],
+        (r, x): (&mut [f32], usize),
+        step: ConstraintStep<L>,
+    ) -> u32 {
+        let (zero, nb) = (L::splat(0.0), self.bmat.len());
+        // Relaxed (γ > 1), r may leave r ≤ 0, so the flag marks r ≠ 0.
+        let mut live = 0;
+        for (k, b) in self.bmat.iter().enumerate() {
+            let u = L::select_bits(step.idle, zero, Self::band_value::<J, L>(b, &bl));
+            let at = &mut r[Rows::band(nb, k, x)..];
+            let old = L::load(at);
+            let next = relaxed::<L>(old, L::min0(L::add_scaled(old, step.sigma, u)), step.over);
+            let next = L::flush(next, step.flush);
+            L::store(at, next);
+            live |= L::nonzero_bits(next);
         }
-        // Relaxed (γ > 1), r may leave r ≤ 0, so the flag counts r ≠ 0 (no early exit: the
-        // count vectorises with the update).
-        let mut nonzero = 0u32;
-        for (rb, &uk) in rp.chunks_exact_mut(LANES).zip(&u) {
-            let old = L::load::<LANES>(rb);
-            let next = relaxed::<L>(old, L::min0(L::add_scaled(old, sigma, uk)), over);
-            let next = L::flush(next, flush);
-            L::store::<LANES>(rb, next);
-            nonzero += L::nonzero(next);
-        }
-        *act = (nonzero > 0) as u8;
+        live
     }
 
     /// The primal update of one row given div q there: α⁺ = prox_{τf}(x + τ(div q − βBᵀr)),
     /// ᾱ = 2α⁺ − x (x = α + (γ − 1)(ᾱ − α), the relaxed point), with J and the lanes as in
     /// [`Joint::dual_row`].
     #[inline(always)]
-    fn primal_row<const J: usize, L: Lanes>(&self, row: PrimalRow<'_>, mat: &[Lane], tau: f32) {
-        let nb = self.nbp;
-        let pixels = row
-            .alpha
-            .chunks_exact_mut(J)
-            .zip(row.bar.chunks_exact_mut(J));
-        let tables = row.m.chunks_exact(J).zip(row.tck);
-        let duals = row
-            .div
-            .chunks_exact(J)
-            .zip(row.active)
-            .zip(row.r.chunks_exact(nb));
-        let over = self.cfg.relaxation as f32 - 1.0;
-        for (((ap, bp), (mp, tck)), ((div, &act), rp)) in pixels.zip(tables).zip(duals) {
+    fn primal_row<const J: usize, L: Lanes>(&self, row: PrimalRow<'_>, mat: &Mat, tau: f32) {
+        let wp = self.rows.wp;
+        let (over, tau) = (L::splat(self.cfg.relaxation as f32 - 1.0), L::splat(tau));
+        for x in (0..wp).step_by(L::WIDTH) {
             // The relaxed primal point x = α⁻ + γ(α − α⁻), with α⁻ = 2α − ᾱ the point the
             // last prox step started from.
-            let a = L::load::<J>(ap);
-            let x = L::add_scaled(a, over, L::sub(L::load::<J>(bp), a));
-            let mut v = L::add_scaled(x, tau, L::load::<J>(div));
-            if act != 0 {
-                v = L::sub(v, L::mul(L::splat(tau), L::rows_t_times(&self.brow, rp)));
+            let a = L::load_fields::<J>(row.alpha, wp, x);
+            let b = L::load_fields::<J>(row.bar, wp, x);
+            let div = L::load_fields::<J>(row.div, wp, x);
+            let xr = fields!(L, J, |c| L::add_scaled(a[c], over, L::sub(b[c], a[c])));
+            let mut v = fields!(L, J, |c| L::add_scaled(xr[c], tau, div[c]));
+            if L::load_flags(&row.active[x..]) != 0 {
+                let btr = self.basis_t_times::<J, L>(row.r, x);
+                v = fields!(L, J, |c| L::sub(v[c], L::mul(tau, btr[c])));
             }
-            let mv = prox_pixel::<J, L>(mat, L::load::<J>(mp), *tck, v);
-            L::store::<J>(bp, L::sub(L::add(mv, mv), x));
-            L::store::<J>(ap, mv);
+            let mp = L::load_fields::<J>(row.m, wp, x);
+            let mv = prox::<J, L>(mat, mp, L::load_fields::<4>(row.tck, wp, x), v);
+            let bar = fields!(L, J, |c| L::sub(L::add(mv[c], mv[c]), xr[c]));
+            L::store_fields(row.bar, wp, x, bar);
+            L::store_fields(row.alpha, wp, x, mv);
         }
+    }
+
+    /// βBᵀr at pixels x.. of a row's r ([`Rows::band`]), summed in band order.
+    #[inline(always)]
+    fn basis_t_times<const J: usize, L: Lanes>(&self, r: &[f32], x: usize) -> [L::V; J] {
+        let nb = self.bmat.len();
+        let mut out = [L::splat(0.0); J];
+        for (k, b) in self.bmat.iter().enumerate() {
+            let rk = L::load(&r[Rows::band(nb, k, x)..]);
+            for (o, &bc) in out.iter_mut().zip(&b[..J]) {
+                *o = L::add(*o, L::mul(L::splat(bc), rk));
+            }
+        }
+        out
     }
 
     /// ½Σω(y − aᵀα)² + ½Σ αᵀη'Qα + λΣ‖∇α‖ at the current α (row sums in f64, fixed order).
     pub fn objective(&self, st: &mut JointState) -> f64 {
-        let wj = self.w * self.j;
+        let rl = self.rows.row_len(self.j);
         let (alpha, lambda) = (&st.alpha, st.lambda);
         let data = DataTerm {
             y: &st.y,
@@ -1025,9 +1073,9 @@ impl Joint {
             tvw: &st.tvw,
         };
         st.row_sums.par_iter_mut().enumerate().for_each_init(
-            || (vec![0.0f32; wj], vec![0.0f32; wj]),
+            || (vec![0.0f32; rl], vec![0.0f32; rl]),
             |(gx, gy), (yy, sum)| {
-                *sum = self.row_cost(row_pair(alpha, wj, yy), &data, lambda, yy, (gx, gy))
+                *sum = self.row_cost(row_pair(alpha, rl, yy), &data, lambda, yy, (gx, gy))
             },
         );
         st.row_sums.iter().sum()
@@ -1062,7 +1110,7 @@ impl Joint {
         let objective = self.iterate(&mut st, self.cfg.iterations, stages)?;
         let mut stats = self.finish(&st, objective, t0, weights.is_some())?;
         stats.discrepancy = search;
-        Ok((from_pixel_major(&st.alpha, self.w, self.h, self.j), stats))
+        Ok((st.alpha_cube(), stats))
     }
 
     /// `iterations` Chambolle–Pock steps, the steps rebalanced halfway and the TV weights
@@ -1099,30 +1147,38 @@ impl Joint {
     /// jumps lose weight), ε = `reweight_eps` × the mean ‖∇α(p)‖; the dual q projected into
     /// the new balls, the extrapolation restarted.
     fn reweight(&self, st: &mut JointState) {
-        let (w, h, j) = (self.w, self.h, self.j);
-        let alpha = &st.alpha;
-        st.tvw.par_chunks_mut(w).enumerate().for_each_init(
-            || (vec![0.0f32; w * j], vec![0.0f32; w * j]),
+        let (w, h, j, wp) = (self.w, self.h, self.j, self.rows.wp);
+        let (alpha, rl) = (&st.alpha, self.rows.row_len(j));
+        let mut g = vec![0.0f32; w * h];
+        g.par_chunks_mut(w).enumerate().for_each_init(
+            || (vec![0.0f32; rl], vec![0.0f32; rl]),
             |(gx, gy), (yy, row)| {
-                row_gradients(row_pair(alpha, w * j, yy), j, gx, gy);
-                let grads = gx.chunks_exact(j).zip(gy.chunks_exact(j));
-                for (g, (x, y)) in row.iter_mut().zip(grads) {
-                    *g = x.iter().chain(y).map(|v| v * v).sum::<f32>().sqrt();
+                row_gradients(row_pair(alpha, rl, yy), self.rows, gx, gy);
+                for (x, g) in row.iter_mut().enumerate() {
+                    let grad = pixel_values(gx, wp, j, x).chain(pixel_values(gy, wp, j, x));
+                    *g = grad.map(|v| v * v).sum::<f32>().sqrt();
                 }
             },
         );
-        let mean = st.tvw.iter().map(|&v| v as f64).sum::<f64>() / st.tvw.len() as f64;
+        let mean = g.iter().map(|&v| v as f64).sum::<f64>() / g.len() as f64;
         let eps = (self.cfg.reweight_eps * mean) as f32;
-        st.tvw = ridge_excess(&st.tvw, w, h);
+        let excess = ridge_excess(&g, w, h);
         let lambda = st.lambda;
         st.tvw
-            .par_iter_mut()
-            .zip(st.qx.par_chunks_mut(j).zip(st.qy.par_chunks_mut(j)))
-            .for_each(|(wp, (qx, qy))| {
-                *wp = if eps > 0.0 { eps / (*wp + eps) } else { 1.0 };
-                let n2: f32 = qx.iter().chain(qy.iter()).map(|v| v * v).sum();
-                let f = ball_factor(n2, lambda * *wp);
-                qx.iter_mut().chain(qy.iter_mut()).for_each(|v| *v *= f);
+            .par_chunks_mut(wp)
+            .zip(st.qx.par_chunks_mut(rl).zip(st.qy.par_chunks_mut(rl)))
+            .zip(excess.par_chunks(w))
+            .for_each(|((tw, (qx, qy)), e)| {
+                for (x, (t, &e)) in tw.iter_mut().zip(e).enumerate() {
+                    *t = if eps > 0.0 { eps / (e + eps) } else { 1.0 };
+                    let q = pixel_values(qx, wp, j, x).chain(pixel_values(qy, wp, j, x));
+                    let n2: f32 = q.map(|v| v * v).sum();
+                    let f = ball_factor::<Scalar>(n2, lambda * *t);
+                    for c in 0..j {
+                        qx[c * wp + x] *= f;
+                        qy[c * wp + x] *= f;
+                    }
+                }
             });
         st.bar.copy_from_slice(&st.alpha);
     }
@@ -1186,51 +1242,50 @@ impl Joint {
             - 2.0 * (dot(&gx, &dqx) + dot(&gy, &dqy) + dot(&bda, &dr))
     }
 
-    /// Kα = (∇α, βBα), pixel-major.
+    /// Kα = (∇α, βBα) of α in rows (`rows.rs`), in rows (βBα banded as r is).
     fn apply_k(&self, alpha: &[f32]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
-        let (mut gx, mut gy) = (vec![0.0f32; w * h * j], vec![0.0f32; w * h * j]);
-        for (yy, (rx, ry)) in gx.chunks_mut(w * j).zip(gy.chunks_mut(w * j)).enumerate() {
-            row_gradients(row_pair(alpha, w * j, yy), j, rx, ry);
+        let (j, nb, wp) = (self.j, self.bmat.len(), self.rows.wp);
+        let rl = self.rows.row_len(j);
+        let (mut gx, mut gy) = (vec![0.0f32; alpha.len()], vec![0.0f32; alpha.len()]);
+        for (yy, (rx, ry)) in gx.chunks_mut(rl).zip(gy.chunks_mut(rl)).enumerate() {
+            row_gradients(row_pair(alpha, rl, yy), self.rows, rx, ry);
         }
-        let mut bv = vec![0.0f32; w * h * nb];
-        for (ap, u) in alpha.chunks_exact(j).zip(bv.chunks_exact_mut(nb)) {
-            with_basis_len!(j, J => {
-                let blocks = self.basis_times::<J, Portable>(&Portable::load::<J>(ap));
-                for (ub, b) in u.chunks_exact_mut(LANES).zip(blocks) {
-                    ub.copy_from_slice(&b);
+        let mut bv = vec![0.0f32; self.rows.len(nb)];
+        for (a, u) in alpha.chunks(rl).zip(bv.chunks_mut(wp * nb)) {
+            for (k, b) in self.bmat.iter().enumerate() {
+                for x in 0..self.w {
+                    u[Rows::band(nb, k, x)] = (0..j).map(|c| b[c] * a[c * wp + x]).sum();
                 }
-            });
+            }
         }
         (gx, gy, bv)
     }
 
     /// ‖K‖² by power iteration on KᵀK (for checking the bound the steps use).
     pub fn power_iteration(&self, iterations: usize) -> f64 {
-        let (w, h, j, nb) = (self.w, self.h, self.j, self.nbp);
-        let n = w * h;
-        let mut v: Vec<f32> = (0..n * j)
+        let (w, j, nb, wp) = (self.w, self.j, self.bmat.len(), self.rows.wp);
+        let rl = self.rows.row_len(j);
+        let start: Vec<f32> = (0..self.w * self.h * j)
             .map(|i| ((i * 7919) % 101) as f32 / 101.0 - 0.5)
             .collect();
+        let mut v = self.rows.pixel_major_to_rows(&start, j);
         let mut est = 0.0;
-        let mut div = vec![0.0f32; w * j];
+        let mut div = vec![0.0f32; rl];
         for _ in 0..iterations {
             let norm = v.iter().map(|&x| (x as f64).powi(2)).sum::<f64>().sqrt();
             v.iter_mut().for_each(|x| *x /= norm as f32);
             let (gx, gy, bv) = self.apply_k(&v);
-            let mut out = vec![0.0f32; n * j];
-            for (yy, orow) in out.chunks_mut(w * j).enumerate() {
-                let at = yy * w * j..;
-                let up = row_above(&gy, w * j, yy);
-                row_divergence(&gx[at.clone()], &gy[at], up, j, &mut div);
-                let pixels = orow.chunks_exact_mut(j).zip(div.chunks_exact(j));
-                for (x, (o, d)) in pixels.enumerate() {
-                    let p = yy * w + x;
-                    let btr = Portable::rows_t_times(&self.brow, &bv[p * nb..(p + 1) * nb]);
-                    o.iter_mut()
-                        .zip(btr)
-                        .zip(d)
-                        .for_each(|((o, b), d)| *o = b - d);
+            let mut out = vec![0.0f32; v.len()];
+            for (yy, orow) in out.chunks_mut(rl).enumerate() {
+                let at = yy * rl..;
+                let up = row_above(&gy, rl, yy);
+                row_divergence(&gx[at.clone()], &gy[at], up, self.rows, &mut div);
+                let bvr = &bv[yy * wp * nb..];
+                for (c, x) in (0..j).flat_map(|c| (0..w).map(move |x| (c, x))) {
+                    let btr: f32 = (self.bmat.iter().enumerate())
+                        .map(|(k, b)| b[c] * bvr[Rows::band(nb, k, x)])
+                        .sum();
+                    orow[c * wp + x] = btr - div[c * wp + x];
                 }
             }
             est = out.iter().zip(&v).map(|(a, b)| (a * b) as f64).sum::<f64>();
@@ -1353,15 +1408,49 @@ pub struct JointTables<'a> {
 }
 
 impl JointState {
+    /// α, pixel-major (J per pixel).
+    pub fn alpha(&self) -> Vec<f32> {
+        self.rows.rows_to_pixel_major(&self.alpha, self.j)
+    }
+
+    /// α as J planes.
+    pub fn alpha_cube(&self) -> Cube {
+        let (w, h) = (self.rows.w, self.rows.h);
+        Cube::from_vec(w, h, self.j, self.rows.rows_to_planes(&self.alpha, self.j))
+            .expect("J planes of w × h")
+    }
+
+    /// Set α from pixel-major values (J per pixel).
+    fn set_alpha(&mut self, pixel_major: &[f32]) {
+        self.alpha = self.rows.pixel_major_to_rows(pixel_major, self.j);
+    }
+
     /// The dual variables and the active flags, pixel-major: (qx, qy, r, active), r padded to
     /// `JointTables::padded_bands` per pixel (for checking another backend's steps).
-    pub fn duals(&self) -> (&[f32], &[f32], &[f32], &[u8]) {
-        (&self.qx, &self.qy, &self.r, &self.active)
+    pub fn duals(&self) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<u8>) {
+        let (rows, j, nbp) = (self.rows, self.j, self.nbp);
+        let bands = self.r.len() / rows.len(1).max(1);
+        let r = rows.bands_to_pixel_major(&self.r, bands);
+        let padded = r.chunks(bands.max(1)).flat_map(|p| {
+            p.iter()
+                .copied()
+                .chain(std::iter::repeat(0.0).take(nbp - bands))
+        });
+        let active = (self.active.chunks(rows.wp))
+            .flat_map(|row| &row[..rows.w])
+            .copied()
+            .collect();
+        (
+            rows.rows_to_pixel_major(&self.qx, j),
+            rows.rows_to_pixel_major(&self.qy, j),
+            padded.collect(),
+            active,
+        )
     }
 
     /// ᾱ = 2α⁺ − x of the last step (x the relaxed point), pixel-major.
-    pub fn extrapolated(&self) -> &[f32] {
-        &self.bar
+    pub fn extrapolated(&self) -> Vec<f32> {
+        self.rows.rows_to_pixel_major(&self.bar, self.j)
     }
 
     /// x = 2α − ᾱ: the point the last prox step started from (the primal part of the
@@ -1383,10 +1472,11 @@ const FLUSH_DECAY: f32 = 0.98;
 
 /// Largest J the per-pixel kernels handle on the stack.
 pub const MAX_J: usize = crate::unmix::MAX_BASIS;
-// A pixel's coefficients fit one lane (`lane::Lane`).
-const _: () = assert!(MAX_J <= LANES);
-/// Largest number of bands (padded) the per-pixel kernels handle on the stack.
+/// Largest number of bands (padded).
 const MAX_BANDS: usize = crate::unmix::MAX_BANDS;
+
+/// A J × J matrix (row r, column c), zero-padded to `MAX_J`.
+type Mat = [[f32; MAX_J]; MAX_J];
 
 /// `$body` with the constant `$J` equal to the basis length `$j` (1..=MAX_J, checked by
 /// [`Joint::new`]): the per-pixel kernels are compiled once per J.
@@ -1430,14 +1520,23 @@ macro_rules! with_basis_len {
 }
 use with_basis_len;
 
-/// One row's dual variables: q (both directions, J per pixel), r (padded bands per pixel) and
-/// the flags of pixels whose r is non-zero.
+/// One row's dual variables: q (both directions, J per pixel), r (banded) and the flags of
+/// pixels whose r is non-zero; the TV weights.
 struct DualRow<'a> {
     qx: &'a mut [f32],
     qy: &'a mut [f32],
     r: &'a mut [f32],
     active: &'a mut [u8],
     weight: &'a [f32],
+}
+
+/// What one constraint update ([`Joint::constraint_dual`]) of `L::WIDTH` pixels reads besides
+/// ᾱ and r: the idle pixels' bits, σ, γ − 1 and the flush threshold.
+struct ConstraintStep<L: Lanes> {
+    idle: u32,
+    sigma: L::V,
+    over: L::V,
+    flush: f32,
 }
 
 /// What one row's dual update reads besides its duals: ∇ᾱ there, σ, λ and the flush
@@ -1501,7 +1600,7 @@ impl<const J: usize> LaneKernel for DualKernel<'_, J> {
 struct PrimalKernel<'a, const J: usize> {
     joint: &'a Joint,
     row: PrimalRow<'a>,
-    mat: &'a [Lane],
+    mat: &'a Mat,
     tau: f32,
 }
 
@@ -1521,7 +1620,8 @@ struct PrimalRow<'a> {
     active: &'a [u8],
     r: &'a [f32],
     m: &'a [f32],
-    tck: &'a [[f32; 4]],
+    /// (t, c, k, cap) of the proximal step, 4 values a pixel.
+    tck: &'a [f32],
 }
 
 /// Rows per strip of [`Joint::sweep`]: a strip's rows of q and r (about 100 kB a row at 768
@@ -1532,9 +1632,9 @@ const STRIP_ROWS: usize = 16;
 /// steps σ and τ, λ and the flush threshold of r.
 struct SweepTables<'a> {
     data: DataTerm<'a>,
-    mat: &'a [Lane],
+    mat: &'a Mat,
     m: &'a [f32],
-    tck: &'a [[f32; 4]],
+    tck: &'a [f32],
     sigma: f32,
     lambda: f32,
     flush: f32,
@@ -1572,8 +1672,8 @@ struct StripFields<'a> {
 }
 
 impl<'a> Strip<'a> {
-    /// The strips of `rows` rows of a `w`-pixel-wide state, J and `nb` values a pixel; `halo`
-    /// holds the first rows of ᾱ and α of each strip (α's empty when the sweep needs no cost).
+    /// The strips of `rows` rows of a `w`-pixel-wide state, J and `nb` values a pixel; `halo` holds the first rows of ᾱ and α of each
+    /// strip (α's empty when the sweep needs no cost).
     fn split(
         f: StripFields<'a>,
         (w, j, nb): (usize, usize, usize),
@@ -1620,41 +1720,49 @@ fn first_rows(u: &[f32], wj: usize, rows: usize) -> Vec<f32> {
 /// The factor that brings a vector of squared norm `n2` into the ball of radius `r`: 1 inside
 /// it, r/√n2 outside (0 for r = 0). The TV dual's projection, in the step and the reweighting.
 #[inline(always)]
-fn ball_factor(n2: f32, r: f32) -> f32 {
-    match (n2 > r * r, r > 0.0) {
-        (false, _) => 1.0,
-        (true, true) => r / n2.sqrt(),
-        (true, false) => 0.0,
-    }
+fn ball_factor<L: Lanes>(n2: L::V, r: L::V) -> L::V {
+    let zero = L::splat(0.0);
+    let outside = L::select_gt(r, zero, L::div(r, L::sqrt(n2)), zero);
+    L::select_gt(n2, L::mul(r, r), outside, L::splat(1.0))
 }
 
 /// The relaxed dual t + (γ − 1)(t − q) of the step's result t, from the old q (exactly t at
 /// γ = 1).
 #[inline(always)]
-fn relaxed<L: Lanes>(q: L::V, t: L::V, over: f32) -> L::V {
+fn relaxed<L: Lanes>(q: L::V, t: L::V, over: L::V) -> L::V {
     L::add_scaled(t, over, L::sub(t, q))
 }
 
-/// prox_{τf}(v) of one pixel, f = ½ω(y − aᵀα)² + ½αᵀη'Qα: (I + τH)⁻¹(v + τωya) by
-/// Sherman–Morrison on M = (I + τη'Q)⁻¹ (J × J, column-major) with its tables m = Ma and
-/// (t, c, k, cap) (`prox_tables`); for a saturated pixel (cap = y) the data term is
-/// ½ω·max(0, y − aᵀα)². J fixed per compiled copy.
+/// M v for a J × J matrix M, each row's products summed in column order.
 #[inline(always)]
-fn prox_pixel<const J: usize, L: Lanes>(
-    mat: &[Lane],
-    mp: L::V,
-    [t, c, k, cap]: [f32; 4],
-    v: L::V,
-) -> L::V {
-    let out = L::mat_vec::<J>(mat, v);
+fn mat_vec<const J: usize, L: Lanes>(mat: &Mat, v: [L::V; J]) -> [L::V; J] {
+    let mut out = [L::splat(0.0); J];
+    for (o, row) in out.iter_mut().zip(mat) {
+        for (&m, &vc) in row[..J].iter().zip(&v) {
+            *o = L::add(*o, L::mul(L::splat(m), vc));
+        }
+    }
+    out
+}
+
+/// prox_{τf}(v) per pixel, f = ½ω(y − aᵀα)² + ½αᵀη'Qα: (I + τH)⁻¹(v + τωya) by
+/// Sherman–Morrison on M = (I + τη'Q)⁻¹ with its tables m = Ma and (t, c, k, cap)
+/// (`prox_tables`); for a saturated pixel (cap = y) the data term is ½ω·max(0, y − aᵀα)².
+/// J fixed per compiled copy.
+#[inline(always)]
+fn prox<const J: usize, L: Lanes>(
+    mat: &Mat,
+    mp: [L::V; J],
+    [t, c, k, cap]: [L::V; 4],
+    v: [L::V; J],
+) -> [L::V; J] {
+    let out = mat_vec::<J, L>(mat, v);
     // aᵀMv = m_pᵀv: the fit without the data term. A saturated pixel whose fit reaches its
     // reading keeps it (its one-sided term is zero there); else the full quadratic's step.
-    let mtv = L::sum(L::mul(mp, v));
-    let coef = match mtv >= cap {
-        true => 0.0,
-        false => t - c * (mtv + t * k),
-    };
-    L::add_scaled(out, coef, mp)
+    let mtv = L::tree_sum::<J>(fields!(L, J, |i| L::mul(mp[i], v[i])));
+    let step = L::sub(t, L::mul(c, L::add(mtv, L::mul(t, k))));
+    let coef = L::select_ge(mtv, cap, L::splat(0.0), step);
+    fields!(L, J, |i| L::add_scaled(out[i], coef, mp[i]))
 }
 
 /// What happens between the iterations of a run (`Joint::iterate`); the default: nothing.
@@ -1697,7 +1805,12 @@ fn ridge_excess(g: &[f32], w: usize, h: usize) -> Vec<f32> {
     out
 }
 
-/// A row of a pixel-major field (`wj` values a row) and the row below it, if there is one.
+/// The values of pixel x in a row's k fields (`rows.rs`), in field order.
+fn pixel_values(v: &[f32], wp: usize, k: usize, x: usize) -> impl Iterator<Item = f32> + '_ {
+    (0..k).map(move |c| v[c * wp + x])
+}
+
+/// A row of a field (`wj` values a row) and the row below it, if there is one.
 fn row_pair(u: &[f32], wj: usize, yy: usize) -> (&[f32], Option<&[f32]>) {
     (
         &u[yy * wj..(yy + 1) * wj],
@@ -1710,15 +1823,22 @@ fn row_above(u: &[f32], wj: usize, yy: usize) -> Option<&[f32]> {
     (yy > 0).then(|| &u[(yy - 1) * wj..yy * wj])
 }
 
-/// Forward differences of a row of a pixel-major field (J per pixel) given the row below
-/// (`None` for the last row), zero across the last column and row (Neumann boundaries, as in
-/// `tv.rs`).
-fn row_gradients((row, next): (&[f32], Option<&[f32]>), j: usize, gx: &mut [f32], gy: &mut [f32]) {
-    let inner = row.len() - j;
-    for (i, g) in gx[..inner].iter_mut().enumerate() {
-        *g = row[i + j] - row[i];
+/// Forward differences of a row of a field in rows (`rows.rs`) given the row below (`None`
+/// for the last row), zero across the last column and row (Neumann boundaries, as in `tv.rs`)
+/// and in the padding.
+fn row_gradients(
+    (row, next): (&[f32], Option<&[f32]>),
+    rows: Rows,
+    gx: &mut [f32],
+    gy: &mut [f32],
+) {
+    let inner = rows.w.saturating_sub(1);
+    for (g, run) in gx.chunks_exact_mut(rows.wp).zip(row.chunks_exact(rows.wp)) {
+        for ((g, b), a) in g.iter_mut().zip(&run[1..rows.w]).zip(run) {
+            *g = b - a;
+        }
+        g[inner..].fill(0.0);
     }
-    gx[inner..].fill(0.0);
     match next {
         Some(next) => {
             for ((g, a), b) in gy.iter_mut().zip(row).zip(next) {
@@ -1731,14 +1851,18 @@ fn row_gradients((row, next): (&[f32], Option<&[f32]>), j: usize, gx: &mut [f32]
 
 /// div q = −∇ᵀq on a row for `row_gradients`' differences, from the row's qx and qy (the first
 /// `div.len()` values of each) and qy of the row above (`None` for the first row); qx must be
-/// zero in the last column and qy in the last row (as every gradient there is).
-fn row_divergence(qx: &[f32], qy: &[f32], up: Option<&[f32]>, j: usize, div: &mut [f32]) {
-    let wj = div.len();
-    let (qxr, qyr) = (&qx[..wj], &qy[..wj]);
-    // The first pixel has no left neighbour and the first row none above: 0 there.
-    div[..j].copy_from_slice(&qxr[..j]);
-    for ((d, q), left) in div[j..].iter_mut().zip(&qxr[j..]).zip(qxr) {
-        *d = q - left;
+/// zero in the last column and qy in the last row (as every gradient there is), and both in
+/// the padding, where div q is 0.
+fn row_divergence(qx: &[f32], qy: &[f32], up: Option<&[f32]>, rows: Rows, div: &mut [f32]) {
+    let (rl, w) = (div.len(), rows.w);
+    let (qxr, qyr) = (&qx[..rl], &qy[..rl]);
+    for (d, q) in div.chunks_exact_mut(rows.wp).zip(qxr.chunks_exact(rows.wp)) {
+        // The first pixel has no left neighbour and the first row none above: 0 there.
+        d[0] = q[0];
+        for ((d, q), left) in d[1..w].iter_mut().zip(&q[1..w]).zip(q) {
+            *d = q - left;
+        }
+        d[w..].fill(0.0);
     }
     match up {
         None => div.iter_mut().zip(qyr).for_each(|(d, q)| *d += q),
@@ -2010,7 +2134,7 @@ mod tests {
         let mut last = f64::INFINITY;
         let mut first = 0.0;
         for it in 0..500 {
-            let before = clone_state(&st);
+            let before = st.clone();
             j.step(&mut st);
             let r = j.step_residual(&before, &st);
             if it == 0 {
@@ -2093,11 +2217,13 @@ mod tests {
         st.qy.fill(-1e3);
         st.bar.fill(7.0);
         j.reweight(&mut st);
+        // 8 pixels a row: the rows' TV weights have no padding.
+        let (qx, qy, _, _) = st.duals();
         for (p, &w) in st.tvw.iter().enumerate() {
             let expected = if p % 8 == 3 { 3.0 / 19.0 } else { 1.0 };
             assert!((w - expected).abs() < 1e-6, "pixel {p}: {w}");
-            let q2: f32 = (st.qx[p * 4..p * 4 + 4].iter())
-                .chain(&st.qy[p * 4..p * 4 + 4])
+            let q2: f32 = (qx[p * 4..p * 4 + 4].iter())
+                .chain(&qy[p * 4..p * 4 + 4])
                 .map(|v| v * v)
                 .sum();
             assert!(q2.sqrt() <= st.lambda * w * (1.0 + 1e-5), "pixel {p}");
@@ -2159,7 +2285,7 @@ mod tests {
         for _ in 0..5 {
             plain.step(&mut st);
         }
-        let (mut to_t, mut to_r) = (clone_state(&st), clone_state(&st));
+        let (mut to_t, mut to_r) = (st.clone(), st.clone());
         plain.step(&mut to_t);
         relaxed.step(&mut to_r);
         let state = |s: &JointState| -> Vec<f64> {
@@ -2183,30 +2309,6 @@ mod tests {
                 (c - want).abs() <= 1e-4 * scale,
                 "entry {k}: {c} against {want}"
             );
-        }
-    }
-
-    fn clone_state(s: &JointState) -> JointState {
-        JointState {
-            alpha: s.alpha.clone(),
-            bar: s.bar.clone(),
-            qx: s.qx.clone(),
-            qy: s.qy.clone(),
-            active: s.active.clone(),
-            r: s.r.clone(),
-            mat: s.mat.clone(),
-            m: s.m.clone(),
-            tck: s.tck.clone(),
-            y: s.y.clone(),
-            omega: s.omega.clone(),
-            omega_scale: s.omega_scale,
-            cap: s.cap.clone(),
-            tvw: s.tvw.clone(),
-            lambda: s.lambda,
-            tau: s.tau,
-            sigma: s.sigma,
-            row_sums: s.row_sums.clone(),
-            flush: s.flush,
         }
     }
 

@@ -211,9 +211,9 @@ fn start_dual_and_primal_steps_match_the_core() {
     );
     assert_eq!(gpu.active, flags, "the active flags");
     for (name, got, want, k) in [
-        ("qx", &gpu.qx, qx, J),
-        ("qy", &gpu.qy, qy, J),
-        ("r", &gpu.r, r, nbp),
+        ("qx", &gpu.qx, &qx, J),
+        ("qy", &gpu.qy, &qy, J),
+        ("r", &gpu.r, &r, nbp),
     ] {
         let e = rel(got, &planes(want, k));
         eprintln!("dual step, {name}: relative L2 {e:.2e}");
@@ -234,15 +234,15 @@ fn start_dual_and_primal_steps_match_the_core() {
     assert!(e < 1e-5, "objective {e:.2e}");
     let gpu = g.state(&ctx).unwrap();
     for (name, got, want) in [
-        ("α", &gpu.alpha, &cpu.alpha),
-        ("ᾱ", &gpu.bar, &cpu.extrapolated().to_vec()),
+        ("α", &gpu.alpha, &cpu.alpha()),
+        ("ᾱ", &gpu.bar, &cpu.extrapolated()),
     ] {
         let e = rel(got, &planes(want, J));
         eprintln!("primal step, {name}: relative L2 {e:.2e}");
         assert!(e < 2e-6, "{name}: {e:.2e}");
     }
     // The cube of the one-step iterate: still infeasible in places, clipped, its violation.
-    let alpha = Cube::from_vec(W, H, J, planes(&cpu.alpha, J)).unwrap();
+    let alpha = cpu.alpha_cube();
     let (cube, violation) = joint.cube(&alpha, None).unwrap();
     let got: Vec<f32> = ctx.read(&cube_buf, BANDS * W * H).unwrap();
     let e = rel(&got, &cube.data);
@@ -283,7 +283,7 @@ fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
         objective.push(joint.objective(&mut st));
         let (sum, positive) = joint.weighted_residual(&st);
         (
-            Cube::from_vec(W, H, J, planes(&st.alpha, J)).unwrap(),
+            st.alpha_cube(),
             objective,
             sum / positive as f64,
         )

@@ -1,69 +1,109 @@
-//! Eight f32 lanes holding one pixel's J ≤ 8 basis coefficients (zero-padded) or eight of its
-//! bands, so the joint iteration's per-pixel work is whole-register operations. The kernels are
-//! written once against [`Lanes`]; [`Portable`] runs them on any CPU and [`Avx`] on AVX
-//! registers, with the same operations in the same order (no fused multiply–add), so the
-//! same bits.
+//! Pixels across the lanes of a register: the joint iteration's per-pixel kernels run on
+//! [`Lanes::WIDTH`] neighbouring pixels at once, one value of each in a lane — eight on AVX
+//! registers, one on any CPU ([`Scalar`]) — so a pixel's J coefficients are J registers and
+//! its sums over them are plain adds, not sums across a register. The kernels are written once
+//! against [`Lanes`], with the same operations in the same order on both (no fused
+//! multiply–add), so the same bits.
 
-/// f32 lanes of one AVX register; also the band loops' padding.
+/// Pixels per AVX register, and the multiple the rows' padded width is rounded to.
 pub(super) const LANES: usize = 8;
 
-/// One pixel's coefficients (or a column of a J × J matrix) in the first J lanes, zeros after.
-pub(super) type Lane = [f32; LANES];
+/// `[e(c) for c in 0..n]` of lane values `L::V`, as a loop: a closure (`array::from_fn`) is
+/// compiled without the kernels' AVX target feature, so the lane operations in it would be
+/// calls, not instructions.
+macro_rules! fields {
+    ($L:ty, $n:expr, |$c:ident| $e:expr) => {{
+        let mut out = [<$L as Lanes>::splat(0.0); $n];
+        for $c in 0..$n {
+            out[$c] = $e;
+        }
+        out
+    }};
+}
+pub(super) use fields;
 
-/// The lane operations of the per-pixel kernels.
+/// The lane operations of the per-pixel kernels, on `WIDTH` pixels at once.
 pub(super) trait Lanes {
     type V: Copy;
+    /// Pixels per value (1 or [`LANES`]).
+    const WIDTH: usize;
     fn splat(x: f32) -> Self::V;
-    /// The first J values of `s`, zero-padded.
-    fn load<const J: usize>(s: &[f32]) -> Self::V;
-    /// The first J lanes of `v` into `d`.
-    fn store<const J: usize>(d: &mut [f32], v: Self::V);
+    /// The first `WIDTH` values of `s`.
+    fn load(s: &[f32]) -> Self::V;
+    /// `v` into the first `WIDTH` values of `d`.
+    fn store(d: &mut [f32], v: Self::V);
     fn add(a: Self::V, b: Self::V) -> Self::V;
     fn sub(a: Self::V, b: Self::V) -> Self::V;
     fn mul(a: Self::V, b: Self::V) -> Self::V;
-    /// min(a, 0) lane by lane.
+    fn div(a: Self::V, b: Self::V) -> Self::V;
+    fn sqrt(a: Self::V) -> Self::V;
+    /// min(a, 0) lane by lane (0 where a is NaN, as f32::min).
     fn min0(a: Self::V) -> Self::V;
-    /// a where s ≥ 0, else b.
-    fn select_nonneg(s: Self::V, a: Self::V, b: Self::V) -> Self::V;
-    /// Σ of the lanes in a fixed tree order: (v₀ + v₄ + v₂ + v₆) + (v₁ + v₅ + v₃ + v₇).
-    fn sum(v: Self::V) -> f32;
-    /// The number of non-zero lanes.
-    fn nonzero(v: Self::V) -> u32;
+    /// x where a ≥ b, else y (y where either is NaN).
+    fn select_ge(a: Self::V, b: Self::V, x: Self::V, y: Self::V) -> Self::V;
+    /// x where a > b, else y (y where either is NaN).
+    fn select_gt(a: Self::V, b: Self::V, x: Self::V, y: Self::V) -> Self::V;
+    /// x in the lanes whose bit is set in `bits`, else y.
+    fn select_bits(bits: u32, x: Self::V, y: Self::V) -> Self::V;
+    /// Bit l set where lane l of a is ≥ 0 (not NaN).
+    fn nonneg_bits(a: Self::V) -> u32;
+    /// Bit l set where lane l is non-zero (NaN counts).
+    fn nonzero_bits(v: Self::V) -> u32;
     /// 0 in the lanes where |v| < d, v elsewhere.
     fn flush(v: Self::V, d: f32) -> Self::V;
-    fn to_array(v: Self::V) -> Lane;
+
+    /// All `WIDTH` bits.
+    const ALL: u32 = if Self::WIDTH >= 32 {
+        u32::MAX
+    } else {
+        (1 << Self::WIDTH) - 1
+    };
 
     /// a + s·b.
     #[inline(always)]
-    fn add_scaled(a: Self::V, s: f32, b: Self::V) -> Self::V {
-        Self::add(a, Self::mul(Self::splat(s), b))
+    fn add_scaled(a: Self::V, s: Self::V, b: Self::V) -> Self::V {
+        Self::add(a, Self::mul(s, b))
     }
 
-    /// Σ_c cols[c]·v[c] over the first J columns: a J × J matrix (by columns) times v.
+    /// Bit l set where flag l of `f` (one byte a pixel) is non-zero.
     #[inline(always)]
-    fn mat_vec<const J: usize>(cols: &[Lane], v: Self::V) -> Self::V {
-        let v = Self::to_array(v);
-        let mut out = Self::splat(0.0);
-        for (col, &vc) in cols[..J].iter().zip(&v) {
-            out = Self::add(out, Self::mul(Self::load::<LANES>(col), Self::splat(vc)));
-        }
-        out
+    fn load_flags(f: &[u8]) -> u32 {
+        f[..Self::WIDTH]
+            .iter()
+            .enumerate()
+            .fold(0, |b, (l, &x)| b | ((x != 0) as u32) << l)
     }
 
-    /// Σ_k r_k·rows[k]: Bᵀr for B given by its rows (one lane each), skipping the blocks of
-    /// `LANES` bands where r is zero (adding r_k·B_k = 0 there would change nothing).
+    /// Flag l of `f` ← bit l of `bits`.
     #[inline(always)]
-    fn rows_t_times(rows: &[Lane], r: &[f32]) -> Self::V {
-        let mut out = Self::splat(0.0);
-        for (block, rb) in rows.chunks_exact(LANES).zip(r.chunks_exact(LANES)) {
-            if Self::nonzero(Self::load::<LANES>(rb)) == 0 {
-                continue;
-            }
-            for (row, &rk) in block.iter().zip(rb) {
-                out = Self::add(out, Self::mul(Self::load::<LANES>(row), Self::splat(rk)));
-            }
+    fn store_flags(f: &mut [u8], bits: u32) {
+        for (l, x) in f[..Self::WIDTH].iter_mut().enumerate() {
+            *x = (bits >> l & 1) as u8;
         }
-        out
+    }
+
+    /// Σ of J ≤ 8 per-pixel terms in a fixed tree order, the terms past J taken as 0:
+    /// (t₀ + t₄ + t₂ + t₆) + (t₁ + t₅ + t₃ + t₇) — the order the GPU's kernels sum in too.
+    #[inline(always)]
+    fn tree_sum<const J: usize>(t: [Self::V; J]) -> Self::V {
+        let mut t8 = [Self::splat(0.0); LANES];
+        t8[..J].copy_from_slice(&t);
+        let half = fields!(Self, 4, |l| Self::add(t8[l], t8[l + 4]));
+        Self::add(Self::add(half[0], half[2]), Self::add(half[1], half[3]))
+    }
+
+    /// The values of J fields at `x` (field c at `c·stride + x`).
+    #[inline(always)]
+    fn load_fields<const J: usize>(s: &[f32], stride: usize, x: usize) -> [Self::V; J] {
+        fields!(Self, J, |c| Self::load(&s[c * stride + x..]))
+    }
+
+    /// `v` into J fields at `x` (field c at `c·stride + x`).
+    #[inline(always)]
+    fn store_fields<const J: usize>(d: &mut [f32], stride: usize, x: usize, v: [Self::V; J]) {
+        for (c, vc) in v.into_iter().enumerate() {
+            Self::store(&mut d[c * stride + x..], vc);
+        }
     }
 }
 
@@ -72,15 +112,15 @@ pub(super) trait LaneKernel {
     fn run<L: Lanes>(self);
 }
 
-/// Run `k` on AVX registers when the CPU has AVX2, else on plain arrays (the same operations in
-/// the same order, so the same bits): the one place the kernels pick their lanes.
+/// Run `k` on AVX registers when the CPU has AVX2, else one pixel at a time (the same
+/// operations in the same order, so the same bits): the one place the kernels pick their lanes.
 pub(super) fn dispatch<K: LaneKernel>(k: K) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, the one feature `on_avx` is compiled for.
         return unsafe { on_avx(k) };
     }
-    k.run::<Portable>()
+    k.run::<Scalar>()
 }
 
 /// `k` on [`Avx`], compiled with AVX2 enabled so the lane operations inline as AVX code.
@@ -90,132 +130,118 @@ unsafe fn on_avx<K: LaneKernel>(k: K) {
     k.run::<Avx>()
 }
 
-/// [`Lanes`] on plain arrays: any CPU.
-pub(super) struct Portable;
+/// [`Lanes`] one pixel wide, on plain f32: any CPU.
+pub(super) struct Scalar;
 
-impl Lanes for Portable {
-    type V = Lane;
+impl Lanes for Scalar {
+    type V = f32;
+    const WIDTH: usize = 1;
     #[inline(always)]
-    fn splat(x: f32) -> Lane {
-        [x; LANES]
+    fn splat(x: f32) -> f32 {
+        x
     }
     #[inline(always)]
-    fn load<const J: usize>(s: &[f32]) -> Lane {
-        let mut v = [0.0; LANES];
-        v[..J].copy_from_slice(&s[..J]);
-        v
+    fn load(s: &[f32]) -> f32 {
+        s[0]
     }
     #[inline(always)]
-    fn store<const J: usize>(d: &mut [f32], v: Lane) {
-        d[..J].copy_from_slice(&v[..J]);
+    fn store(d: &mut [f32], v: f32) {
+        d[0] = v;
     }
     #[inline(always)]
-    fn add(a: Lane, b: Lane) -> Lane {
-        std::array::from_fn(|l| a[l] + b[l])
+    fn add(a: f32, b: f32) -> f32 {
+        a + b
     }
     #[inline(always)]
-    fn sub(a: Lane, b: Lane) -> Lane {
-        std::array::from_fn(|l| a[l] - b[l])
+    fn sub(a: f32, b: f32) -> f32 {
+        a - b
     }
     #[inline(always)]
-    fn mul(a: Lane, b: Lane) -> Lane {
-        std::array::from_fn(|l| a[l] * b[l])
+    fn mul(a: f32, b: f32) -> f32 {
+        a * b
     }
     #[inline(always)]
-    fn min0(a: Lane) -> Lane {
-        a.map(|v| v.min(0.0))
+    fn div(a: f32, b: f32) -> f32 {
+        a / b
     }
     #[inline(always)]
-    fn select_nonneg(s: Lane, a: Lane, b: Lane) -> Lane {
-        std::array::from_fn(|l| if s[l] >= 0.0 { a[l] } else { b[l] })
+    fn sqrt(a: f32) -> f32 {
+        a.sqrt()
     }
     #[inline(always)]
-    fn sum(v: Lane) -> f32 {
-        let half: [f32; 4] = std::array::from_fn(|l| v[l] + v[l + 4]);
-        (half[0] + half[2]) + (half[1] + half[3])
+    fn min0(a: f32) -> f32 {
+        a.min(0.0)
     }
     #[inline(always)]
-    fn nonzero(v: Lane) -> u32 {
-        v.iter().map(|&x| (x != 0.0) as u32).sum()
+    fn select_ge(a: f32, b: f32, x: f32, y: f32) -> f32 {
+        if a >= b {
+            x
+        } else {
+            y
+        }
     }
     #[inline(always)]
-    fn flush(v: Lane, d: f32) -> Lane {
-        v.map(|x| if x.abs() < d { 0.0 } else { x })
+    fn select_gt(a: f32, b: f32, x: f32, y: f32) -> f32 {
+        if a > b {
+            x
+        } else {
+            y
+        }
     }
     #[inline(always)]
-    fn to_array(v: Lane) -> Lane {
-        v
+    fn select_bits(bits: u32, x: f32, y: f32) -> f32 {
+        if bits & 1 != 0 {
+            x
+        } else {
+            y
+        }
+    }
+    #[inline(always)]
+    fn nonneg_bits(a: f32) -> u32 {
+        (a >= 0.0) as u32
+    }
+    #[inline(always)]
+    fn nonzero_bits(v: f32) -> u32 {
+        (v != 0.0) as u32
+    }
+    #[inline(always)]
+    fn flush(v: f32, d: f32) -> f32 {
+        if v.abs() < d {
+            0.0
+        } else {
+            v
+        }
     }
 }
 
-/// [`Lanes`] on AVX registers; only for code compiled with AVX2 enabled and run on a CPU that
-/// has it (`on_avx`, picked at run time by `dispatch`).
+/// [`Lanes`] on AVX registers, eight pixels; only for code compiled with AVX2 enabled and run
+/// on a CPU that has it (`on_avx`, picked at run time by `dispatch`).
 #[cfg(target_arch = "x86_64")]
 pub(super) struct Avx;
 
 #[cfg(target_arch = "x86_64")]
 use std::arch::x86_64::*;
 
-// Partial loads and stores touch exactly the J values (no masked moves): a masked store
-// followed by a load of the next pixel's overlapping 32 bytes cannot be forwarded and
-// stalls the loop (it did: a quarter of the primal step's samples on one load).
-
-/// s[0..n] (n ≤ 4, n ≤ s.len(), checked by the caller) in the low lanes, zeros above.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn load_part(s: *const f32, n: usize) -> __m128 {
-    match n {
-        0 => _mm_setzero_ps(),
-        1 => _mm_load_ss(s),
-        2 => _mm_castpd_ps(_mm_load_sd(s.cast())),
-        3 => _mm_movelh_ps(_mm_castpd_ps(_mm_load_sd(s.cast())), _mm_load_ss(s.add(2))),
-        _ => _mm_loadu_ps(s),
-    }
-}
-
-/// The low n lanes of v (n ≤ 4, n ≤ d.len(), checked by the caller) into d[0..n].
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-unsafe fn store_part(d: *mut f32, n: usize, v: __m128) {
-    match n {
-        0 => {}
-        1 => _mm_store_ss(d, v),
-        2 => _mm_store_sd(d.cast(), _mm_castps_pd(v)),
-        3 => {
-            _mm_store_sd(d.cast(), _mm_castps_pd(v));
-            _mm_store_ss(d.add(2), _mm_movehl_ps(v, v));
-        }
-        _ => _mm_storeu_ps(d, v),
-    }
-}
-
 // SAFETY (every method): `Avx` is only used inside functions compiled with AVX2 enabled,
 // which run only after `is_x86_feature_detected!("avx2")`; loads and stores touch the
-// first J (≤ the slice's length, checked) values only.
+// first 8 values of a slice whose length is checked first.
 #[cfg(target_arch = "x86_64")]
 impl Lanes for Avx {
     type V = __m256;
+    const WIDTH: usize = LANES;
     #[inline(always)]
     fn splat(x: f32) -> __m256 {
         unsafe { _mm256_set1_ps(x) }
     }
     #[inline(always)]
-    fn load<const J: usize>(s: &[f32]) -> __m256 {
-        let s = &s[..J];
-        unsafe {
-            let lo = load_part(s.as_ptr(), J.min(4));
-            let hi = load_part(s.as_ptr().add(J.min(4)), J.saturating_sub(4));
-            _mm256_set_m128(hi, lo)
-        }
+    fn load(s: &[f32]) -> __m256 {
+        let s = &s[..LANES];
+        unsafe { _mm256_loadu_ps(s.as_ptr()) }
     }
     #[inline(always)]
-    fn store<const J: usize>(d: &mut [f32], v: __m256) {
-        let d = &mut d[..J];
-        unsafe {
-            store_part(d.as_mut_ptr(), J.min(4), _mm256_castps256_ps128(v));
-            let hi = _mm256_extractf128_ps(v, 1);
-            store_part(d.as_mut_ptr().add(J.min(4)), J.saturating_sub(4), hi);
-        }
+    fn store(d: &mut [f32], v: __m256) {
+        let d = &mut d[..LANES];
+        unsafe { _mm256_storeu_ps(d.as_mut_ptr(), v) }
     }
     #[inline(always)]
     fn add(a: __m256, b: __m256) -> __m256 {
@@ -230,28 +256,42 @@ impl Lanes for Avx {
         unsafe { _mm256_mul_ps(a, b) }
     }
     #[inline(always)]
+    fn div(a: __m256, b: __m256) -> __m256 {
+        unsafe { _mm256_div_ps(a, b) }
+    }
+    #[inline(always)]
+    fn sqrt(a: __m256) -> __m256 {
+        unsafe { _mm256_sqrt_ps(a) }
+    }
+    #[inline(always)]
     fn min0(a: __m256) -> __m256 {
         // minps returns its second operand (0) when a is NaN, as f32::min(NaN, 0) does.
         unsafe { _mm256_min_ps(a, _mm256_setzero_ps()) }
     }
     #[inline(always)]
-    fn select_nonneg(s: __m256, a: __m256, b: __m256) -> __m256 {
-        unsafe { _mm256_blendv_ps(b, a, _mm256_cmp_ps(s, _mm256_setzero_ps(), _CMP_GE_OQ)) }
+    fn select_ge(a: __m256, b: __m256, x: __m256, y: __m256) -> __m256 {
+        unsafe { _mm256_blendv_ps(y, x, _mm256_cmp_ps(a, b, _CMP_GE_OQ)) }
     }
     #[inline(always)]
-    fn sum(v: __m256) -> f32 {
+    fn select_gt(a: __m256, b: __m256, x: __m256, y: __m256) -> __m256 {
+        unsafe { _mm256_blendv_ps(y, x, _mm256_cmp_ps(a, b, _CMP_GT_OQ)) }
+    }
+    #[inline(always)]
+    fn select_bits(bits: u32, x: __m256, y: __m256) -> __m256 {
         unsafe {
-            let half = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
-            let pairs = _mm_add_ps(half, _mm_movehl_ps(half, half));
-            _mm_cvtss_f32(_mm_add_ss(pairs, _mm_movehdup_ps(pairs)))
+            let lane_bit = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+            let set = _mm256_and_si256(_mm256_set1_epi32(bits as i32), lane_bit);
+            let mask = _mm256_cmpeq_epi32(set, lane_bit);
+            _mm256_blendv_ps(y, x, _mm256_castsi256_ps(mask))
         }
     }
     #[inline(always)]
-    fn nonzero(v: __m256) -> u32 {
-        unsafe {
-            let ne = _mm256_cmp_ps(v, _mm256_setzero_ps(), _CMP_NEQ_UQ);
-            (_mm256_movemask_ps(ne) as u32).count_ones()
-        }
+    fn nonneg_bits(a: __m256) -> u32 {
+        unsafe { _mm256_movemask_ps(_mm256_cmp_ps(a, _mm256_setzero_ps(), _CMP_GE_OQ)) as u32 }
+    }
+    #[inline(always)]
+    fn nonzero_bits(v: __m256) -> u32 {
+        unsafe { _mm256_movemask_ps(_mm256_cmp_ps(v, _mm256_setzero_ps(), _CMP_NEQ_UQ)) as u32 }
     }
     #[inline(always)]
     fn flush(v: __m256, d: f32) -> __m256 {
@@ -260,78 +300,82 @@ impl Lanes for Avx {
             _mm256_andnot_ps(_mm256_cmp_ps(abs, _mm256_set1_ps(d), _CMP_LT_OQ), v)
         }
     }
-    #[inline(always)]
-    fn to_array(v: __m256) -> Lane {
-        let mut out = [0.0; LANES];
-        unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
-        out
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// The kernels' operations on `L`, on fixed inputs (NaN-free), as plain arrays.
-    fn ops<L: Lanes>() -> Vec<Lane> {
-        let a = L::load::<6>(&[1.5, -2.0, 3.25, 0.0, -0.5, 7.0, 99.0]);
-        let b = L::load::<LANES>(&[0.1, 0.2, -0.3, 0.4, -5.0, 6.0, 0.7, -0.8]);
-        let rows: Vec<Lane> = (0..16)
-            .map(|k| [k as f32, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5])
-            .collect();
-        let mut r = vec![0.0f32; 16];
-        (r[9], r[15]) = (-2.0, 0.5);
-        let cols = [
-            [1.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            [2.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        ];
-        let mut stored = [7.0f32; LANES];
-        L::store::<3>(&mut stored, b);
-        vec![
-            L::to_array(L::add_scaled(a, 0.3, b)),
-            L::to_array(L::sub(a, b)),
-            L::to_array(L::min0(b)),
-            L::to_array(L::select_nonneg(b, a, L::splat(-1.0))),
-            [
-                L::sum(b),
-                L::sum(a),
-                L::nonzero(a) as f32,
-                L::nonzero(b) as f32,
-                0.0,
-                0.0,
-                0.0,
-                0.0,
-            ],
-            L::to_array(L::mat_vec::<2>(&cols, L::load::<2>(&[1.0, -1.0]))),
-            L::to_array(L::rows_t_times(&rows, &r)),
-            stored,
-            L::to_array(L::flush(b, 0.35)),
-        ]
+    /// The kernels' operations on `L`, over eight pixels, on fixed inputs with a NaN and
+    /// signed zeros among them, as bit patterns.
+    fn ops<L: Lanes>() -> Vec<u32> {
+        let a = [1.5, -2.0, 3.25, 0.0, -0.5, 7.0, f32::NAN, -0.0];
+        let b = [0.1, 0.2, -0.3, 0.4, -5.0, 6.0, 0.7, -0.8];
+        let flags = [1u8, 0, 0, 3, 0, 0, 0, 1];
+        let mut out = vec![0.0f32; LANES * 9];
+        let mut bits = Vec::new();
+        let mut stored = [9u8; LANES];
+        for x in (0..LANES).step_by(L::WIDTH) {
+            let (va, vb) = (L::load(&a[x..]), L::load(&b[x..]));
+            let fields: [L::V; 7] = [
+                L::add_scaled(va, L::splat(0.3), vb),
+                L::div(vb, L::sqrt(L::mul(vb, vb))),
+                L::min0(va),
+                L::select_ge(va, vb, va, L::splat(-1.0)),
+                L::select_gt(vb, L::splat(0.2), vb, va),
+                L::flush(vb, 0.35),
+                L::select_bits(0b1010_0110 >> x, va, vb),
+            ];
+            L::store_fields(&mut out, LANES, x, fields);
+            let sums = [L::sub(va, vb), vb, va, L::splat(2.0), vb, vb, vb];
+            L::store(&mut out[7 * LANES + x..], L::tree_sum(sums));
+            L::store(&mut out[8 * LANES + x..], L::tree_sum([vb, va]));
+            bits.extend([
+                L::nonneg_bits(va) << x,
+                L::nonzero_bits(va) << x,
+                L::load_flags(&flags[x..]) << x,
+            ]);
+            L::store_flags(&mut stored[x..], L::load_flags(&flags[x..]));
+        }
+        let words = |k: usize| bits.iter().skip(k).step_by(3).fold(0, |s, b| s | b);
+        let mut all: Vec<u32> = out.iter().map(|v| v.to_bits()).collect();
+        all.extend([words(0), words(1), words(2)]);
+        all.extend(stored.map(u32::from));
+        all
     }
 
     #[test]
-    fn portable_lanes_by_hand() {
-        let out = ops::<Portable>();
-        assert_eq!(out[1][..7], [1.4, -2.2, 3.55, -0.4, 4.5, 1.0, -0.7]);
-        assert_eq!(out[2], [0.0, 0.0, -0.3, 0.0, -5.0, 0.0, 0.0, -0.8]);
-        assert_eq!(out[3], [1.5, -2.0, -1.0, 0.0, -1.0, 7.0, 0.0, -1.0]);
-        assert_eq!(out[4][1..4], [9.25, 5.0, 8.0]);
-        // [[1, 2], [3, 4]] by columns, times (1, −1).
-        assert_eq!(out[5][..3], [-1.0, -1.0, 0.0]);
-        // Bᵀr with B_k = (k, 1, 0 …, ½): r non-zero in the second block only.
-        assert_eq!(out[6][..3], [9.0 * -2.0 + 15.0 * 0.5, -1.5, 0.0]);
-        assert_eq!(out[6][7], -0.75);
-        assert_eq!(out[7], [0.1, 0.2, -0.3, 7.0, 7.0, 7.0, 7.0, 7.0]);
-        assert_eq!(out[8], [0.0, 0.0, 0.0, 0.4, -5.0, 6.0, 0.7, -0.8]);
+    fn scalar_lanes_by_hand() {
+        let out = ops::<Scalar>();
+        let f = |field: usize, l: usize| f32::from_bits(out[field * LANES + l]);
+        assert_eq!(f(0, 0), 1.5 + 0.3 * 0.1);
+        assert_eq!((f(1, 2), f(1, 4)), (-1.0, -1.0));
+        assert_eq!((f(2, 0), f(2, 1), f(2, 6)), (0.0, -2.0, 0.0));
+        assert_eq!((f(3, 0), f(3, 1), f(3, 6)), (1.5, -1.0, -1.0));
+        assert_eq!((f(4, 0), f(4, 1), f(4, 3)), (1.5, -2.0, 0.4));
+        assert_eq!((f(5, 0), f(5, 3), f(5, 4)), (0.0, 0.4, -5.0));
+        let picked: Vec<f32> = (0..4).map(|l| f(6, l)).collect();
+        assert_eq!(picked, [0.1, -2.0, 3.25, 0.4]);
+        // (t₀ + t₄ + t₂ + t₆) + (t₁ + t₅ + t₃ + t₇) with t₇ = 0.
+        let (a, b) = (1.5f32, 0.1f32);
+        assert_eq!(f(7, 0), (((a - b) + b) + (a + b)) + ((b + b) + (2.0 + 0.0)));
+        assert_eq!(
+            f(8, 0),
+            ((b + 0.0) + (0.0 + 0.0)) + ((a + 0.0) + (0.0 + 0.0))
+        );
+        let n = LANES * 9;
+        // Non-negative: 1.5, 3.25, 0, 7, −0 (−0 ≥ 0); non-zero: all but the zeros (NaN counts).
+        assert_eq!(out[n..n + 3], [0b1010_1101, 0b0111_0111, 0b1000_1001]);
+        assert_eq!(out[n + 3..], [1, 0, 0, 1, 0, 0, 0, 1]);
     }
 
     #[test]
     #[cfg(target_arch = "x86_64")]
-    fn avx_lanes_are_the_portable_lanes_to_the_bit() {
+    fn avx_lanes_are_the_scalar_lanes_to_the_bit() {
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
-        struct Ops<'a>(&'a mut Vec<Lane>);
+        struct Ops<'a>(&'a mut Vec<u32>);
         impl LaneKernel for Ops<'_> {
             fn run<L: Lanes>(self) {
                 *self.0 = ops::<L>();
@@ -340,8 +384,6 @@ mod tests {
         let mut avx = Vec::new();
         // SAFETY: the CPU has AVX2.
         unsafe { on_avx(Ops(&mut avx)) };
-        let bits =
-            |v: &Vec<Lane>| -> Vec<u32> { v.iter().flatten().map(|x| x.to_bits()).collect() };
-        assert_eq!(bits(&avx), bits(&ops::<Portable>()));
+        assert_eq!(avx, ops::<Scalar>());
     }
 }

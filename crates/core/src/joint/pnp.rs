@@ -12,8 +12,8 @@
 //! second copy z₂ = P_C(x + u₂) (consensus ADMM: x against (z, z₂), still two blocks, so the
 //! same argument holds); the output is then z₂, feasible.
 
-use super::lane::{Lanes, Portable};
-use super::{from_pixel_major, prox_pixel, with_basis_len, Joint, JointStats, MAX_J};
+use super::lane::Scalar;
+use super::{from_pixel_major, prox, with_basis_len, Joint, JointStats, MAX_J};
 use crate::denoise::GraphSmoother;
 use crate::error::{Error, Result};
 use crate::noise::DataWeights;
@@ -71,15 +71,16 @@ pub fn run(
     };
     let copies = if projector.is_some() { 2.0 } else { 1.0 };
     let (mat, m, tck) = joint.prox_tables(tau / copies, &st)?;
-    let n = st.alpha.len();
+    let alpha = st.alpha();
+    let n = alpha.len();
     let mut s = Admm {
-        x: st.alpha.clone(),
-        z: st.alpha.clone(),
+        x: alpha.clone(),
+        z: alpha.clone(),
         u: vec![0.0; n],
         scratch: vec![0.0; n],
         tmp: vec![0.0; n],
         z2: if projector.is_some() {
-            st.alpha.clone()
+            alpha
         } else {
             Vec::new()
         },
@@ -110,8 +111,9 @@ pub fn run(
                     }
                 }
                 with_basis_len!(j, J => {
-                    let out = prox_pixel::<J, Portable>(&mat, Portable::load::<J>(mp), t, v);
-                    Portable::store::<J>(xp, out);
+                    let mp = std::array::from_fn(|c| mp[c]);
+                    let out = prox::<J, Scalar>(&mat, mp, t, std::array::from_fn(|c| v[c]));
+                    xp.copy_from_slice(&out);
                 });
             });
         // s.scratch = x + u: the smoother's input and, before the freeze, its guide.
@@ -131,14 +133,14 @@ pub fn run(
         }
         fixed_point.push(change);
     }
-    st.alpha
-        .copy_from_slice(if projector.is_some() { &s.z2 } else { &s.z });
+    let alpha = if projector.is_some() { s.z2 } else { s.z };
+    st.set_alpha(&alpha);
     let last = joint.objective(&mut st);
     let mut stats = joint.finish(&st, vec![first, last], t0, weights.is_some())?;
     stats.steps = [tau, 0.0];
     stats.lambda = 0.0;
     stats.fixed_point = fixed_point;
-    Ok((from_pixel_major(&st.alpha, w, h, j), stats))
+    Ok((from_pixel_major(&alpha, w, h, j), stats))
 }
 
 /// z⁺ = `s.scratch`: u ← u + x − z⁺, z ← z⁺; returns ‖z⁺ − z‖² + ‖Δu‖² (Δu = x − z⁺).
