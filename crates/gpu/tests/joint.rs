@@ -282,11 +282,7 @@ fn thirty_weighted_iterations_match_the_core_with_cube_and_channels() {
         let mut objective: Vec<f64> = (0..iterations).map(|_| joint.step(&mut st)).collect();
         objective.push(joint.objective(&mut st));
         let (sum, positive) = joint.weighted_residual(&st);
-        (
-            st.alpha_cube(),
-            objective,
-            sum / positive as f64,
-        )
+        (st.alpha_cube(), objective, sum / positive as f64)
     };
     let (cube, violation) = joint.cube(&alpha, Some(&gains)).unwrap();
     let channels = joint.channels(&alpha).unwrap();

@@ -83,7 +83,7 @@ pub(super) trait Lanes {
     }
 
     /// Σ of J ≤ 8 per-pixel terms in a fixed tree order, the terms past J taken as 0:
-    /// (t₀ + t₄ + t₂ + t₆) + (t₁ + t₅ + t₃ + t₇) — the order the GPU's kernels sum in too.
+    /// (t₀ + t₄ + t₂ + t₆) + (t₁ + t₅ + t₃ + t₇), on every `WIDTH` (so the same bits).
     #[inline(always)]
     fn tree_sum<const J: usize>(t: [Self::V; J]) -> Self::V {
         let mut t8 = [Self::splat(0.0); LANES];
