@@ -2073,33 +2073,51 @@ mod tests {
         assert!(est > 0.8 * j.operator_norm().powi(2), "{est}");
     }
 
-    /// The fused sweep gives the same bits for strips of 1 row (every dual update, then every
-    /// primal one: the two passes), 3 and 16 rows, one strip and more rows than the frame has,
-    /// on a 37-row frame with the constraint's dual live and flushed.
-    #[test]
-    fn the_sweep_gives_the_same_bits_for_any_strip_height() {
+    /// Six traced sweeps of `rows`-row strips on a 37 × 37 frame (37 pixels padded to 40)
+    /// with the constraint's dual live and flushed: the objectives, every field's bits and the
+    /// flags.
+    fn six_sweeps(rows: usize) -> (Vec<f64>, Vec<u32>, Vec<u8>) {
         let j = solver(37, 1.0, JointConfig::default());
         let t = truth_with_live_constraint(37);
-        let y = frame_of(&j, &t);
-        let run = |rows: usize| {
-            let mut st = j.start(&y, &flat_seed(&t), None).unwrap();
-            st.flush = 0.01 * st.lambda;
-            let costs: Vec<f64> = (0..6).map(|_| j.sweep(&mut st, true, rows)).collect();
-            let fields = [&st.alpha, &st.bar, &st.qx, &st.qy, &st.r];
-            let bits: Vec<u32> = fields
-                .iter()
-                .flat_map(|v| v.iter().map(|x| x.to_bits()))
-                .collect();
-            (costs, bits, st.active.clone())
-        };
-        let two_passes = run(1);
+        let mut st = j.start(&frame_of(&j, &t), &flat_seed(&t), None).unwrap();
+        st.flush = 0.01 * st.lambda;
+        let costs: Vec<f64> = (0..6).map(|_| j.sweep(&mut st, true, rows)).collect();
+        let fields = [&st.alpha, &st.bar, &st.qx, &st.qy, &st.r];
+        let bits: Vec<u32> = fields
+            .iter()
+            .flat_map(|v| v.iter().map(|x| x.to_bits()))
+            .collect();
+        (costs, bits, st.active.clone())
+    }
+
+    /// The fused sweep gives the same bits for strips of 1 row (every dual update, then every
+    /// primal one: the two passes), 3 and 16 rows, one strip and more rows than the frame has.
+    #[test]
+    fn the_sweep_gives_the_same_bits_for_any_strip_height() {
+        let two_passes = six_sweeps(1);
         assert!(
             two_passes.2.contains(&1),
             "the constraint's dual never became live"
         );
         for rows in [3, 16, 37, 64] {
-            assert!(run(rows) == two_passes, "strips of {rows} rows");
+            assert!(six_sweeps(rows) == two_passes, "strips of {rows} rows");
         }
+    }
+
+    /// The kernels on eight pixels a register (AVX2, where the CPU has it) give the bits of the
+    /// one-pixel scalar kernels, the padding and the row ends included.
+    #[test]
+    fn the_lanes_give_the_scalar_kernels_bits() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
+        let scalar = pool.install(|| lane::tests::on_scalar_lanes(|| six_sweeps(16)));
+        assert!(
+            scalar.2.contains(&1),
+            "the constraint's dual never became live"
+        );
+        assert!(six_sweeps(16) == scalar);
     }
 
     #[test]

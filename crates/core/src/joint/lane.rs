@@ -115,6 +115,10 @@ pub(super) trait LaneKernel {
 /// Run `k` on AVX registers when the CPU has AVX2, else one pixel at a time (the same
 /// operations in the same order, so the same bits): the one place the kernels pick their lanes.
 pub(super) fn dispatch<K: LaneKernel>(k: K) {
+    #[cfg(test)]
+    if tests::scalar_only() {
+        return k.run::<Scalar>();
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, the one feature `on_avx` is compiled for.
@@ -303,8 +307,27 @@ impl Lanes for Avx {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
+    use std::cell::Cell;
+
+    thread_local! {
+        static SCALAR_ONLY: Cell<bool> = const { Cell::new(false) };
+    }
+
+    /// True while `on_scalar_lanes` runs its closure on this thread.
+    pub fn scalar_only() -> bool {
+        SCALAR_ONLY.with(Cell::get)
+    }
+
+    /// `f()` with `dispatch` picking `Scalar` on this thread (kernels run under rayon take
+    /// other threads: call with a one-thread pool).
+    pub fn on_scalar_lanes<T>(f: impl FnOnce() -> T) -> T {
+        SCALAR_ONLY.with(|s| s.set(true));
+        let out = f();
+        SCALAR_ONLY.with(|s| s.set(false));
+        out
+    }
 
     /// The kernels' operations on `L`, over eight pixels, on fixed inputs with a NaN and
     /// signed zeros among them, as bit patterns.
