@@ -1891,33 +1891,6 @@ fn to_pixel_major(c: &Cube) -> Vec<f32> {
     out
 }
 
-/// Pixel-major → planes.
-fn from_pixel_major(v: &[f32], w: usize, h: usize, j: usize) -> Cube {
-    // In blocks of pixels, each block's J planes filled from its part of v (which stays in
-    // cache), rather than one strided pass over all of v per plane.
-    const BLOCK: usize = 4096;
-    let n = w * h;
-    let mut c = Cube::zeros(w, h, j);
-    let mut blocks: Vec<Vec<&mut [f32]>> = (0..n.div_ceil(BLOCK)).map(|_| Vec::new()).collect();
-    for plane in c.data.chunks_exact_mut(n.max(1)) {
-        for (b, part) in plane.chunks_mut(BLOCK).enumerate() {
-            blocks[b].push(part);
-        }
-    }
-    blocks
-        .into_par_iter()
-        .enumerate()
-        .for_each(|(b, mut planes)| {
-            let src = &v[b * BLOCK * j..];
-            for (k, plane) in planes.iter_mut().enumerate() {
-                for (o, px) in plane.iter_mut().zip(src.chunks_exact(j)) {
-                    *o = px[k];
-                }
-            }
-        });
-    c
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

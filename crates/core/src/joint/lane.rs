@@ -53,11 +53,7 @@ pub(super) trait Lanes {
     fn flush(v: Self::V, d: f32) -> Self::V;
 
     /// All `WIDTH` bits.
-    const ALL: u32 = if Self::WIDTH >= 32 {
-        u32::MAX
-    } else {
-        (1 << Self::WIDTH) - 1
-    };
+    const ALL: u32 = (1 << Self::WIDTH) - 1;
 
     /// a + s·b.
     #[inline(always)]

@@ -13,7 +13,7 @@
 //! same argument holds); the output is then z₂, feasible.
 
 use super::lane::Scalar;
-use super::{from_pixel_major, prox, with_basis_len, Joint, JointStats, MAX_J};
+use super::{prox, with_basis_len, Joint, JointStats, MAX_J};
 use crate::denoise::GraphSmoother;
 use crate::error::{Error, Result};
 use crate::noise::DataWeights;
@@ -140,7 +140,7 @@ pub fn run(
     stats.steps = [tau, 0.0];
     stats.lambda = 0.0;
     stats.fixed_point = fixed_point;
-    Ok((from_pixel_major(&alpha, w, h, j), stats))
+    Ok((st.alpha_cube(), stats))
 }
 
 /// z⁺ = `s.scratch`: u ← u + x − z⁺, z ← z⁺; returns ‖z⁺ − z‖² + ‖Δu‖² (Δu = x − z⁺).

@@ -46,17 +46,7 @@ impl Rows {
 
     /// A banded field (`nb` bands a pixel) → pixel-major, the padding dropped.
     pub fn bands_to_pixel_major(&self, v: &[f32], nb: usize) -> Vec<f32> {
-        let mut out = vec![0.0f32; self.w * self.h * nb];
-        out.par_chunks_mut((self.w * nb).max(1))
-            .zip(v.par_chunks(self.row_len(nb).max(1)))
-            .for_each(|(o, row)| {
-                for (x, px) in o.chunks_exact_mut(nb).enumerate() {
-                    for (k, value) in px.iter_mut().enumerate() {
-                        *value = row[Rows::band(nb, k, x)];
-                    }
-                }
-            });
-        out
+        self.scatter(v, nb, |k, x| Rows::band(nb, k, x))
     }
 
     /// A field of k values a pixel from `get(c, p)`, value c of pixel p = y·w + x; zeros in
@@ -89,14 +79,20 @@ impl Rows {
 
     /// Rows → pixel-major (k per pixel), the padding dropped.
     pub fn rows_to_pixel_major(&self, v: &[f32], k: usize) -> Vec<f32> {
-        let (w, wp) = (self.w, self.wp);
+        let wp = self.wp;
+        self.scatter(v, k, |c, x| c * wp + x)
+    }
+
+    /// A field of k values a pixel, value c of pixel x at `at(c, x)` in its row → pixel-major,
+    /// the padding dropped.
+    fn scatter(&self, v: &[f32], k: usize, at: impl Fn(usize, usize) -> usize + Sync) -> Vec<f32> {
         let mut out = vec![0.0f32; self.w * self.h * k];
-        out.par_chunks_mut((w * k).max(1))
+        out.par_chunks_mut((self.w * k).max(1))
             .zip(v.par_chunks(self.row_len(k).max(1)))
             .for_each(|(o, row)| {
                 for (x, px) in o.chunks_exact_mut(k).enumerate() {
                     for (c, value) in px.iter_mut().enumerate() {
-                        *value = row[c * wp + x];
+                        *value = row[at(c, x)];
                     }
                 }
             });
