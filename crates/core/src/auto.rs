@@ -5,7 +5,7 @@
 
 use crate::demux::WindowShape;
 use crate::gap::Method;
-use crate::joint::Prior;
+use crate::joint::{Prior, DEFAULT_REWEIGHT_ROUNDS};
 use serde::Serialize;
 
 /// One measured setting (crop 0.25, square window): median seconds of the whole reconstruction
@@ -269,18 +269,23 @@ pub struct Choice {
     pub measured_on: String,
 }
 
-/// True for the bench rows the tables hold: crop 0.25, square window, plain TV prior (not
-/// reweighted), no noise weights (`specmux bench` and `[reconstruct] auto_table` select them
-/// alike).
+/// True for the bench rows the tables hold: crop 0.25, square window, the TV prior, no noise
+/// weights, and the joint method at its default reweighting (`specmux bench` and
+/// `[reconstruct] auto_table` select them alike).
 pub fn tabled(
+    method: Method,
     crop: f64,
     window: WindowShape,
     prior: Prior,
     noise_weighted: bool,
     reweight_rounds: usize,
 ) -> bool {
-    let plain_tv = prior == Prior::Tv && reweight_rounds == 0;
-    crop == 0.25 && window == WindowShape::Square && plain_tv && !noise_weighted
+    let default_rounds = match method {
+        Method::Joint => DEFAULT_REWEIGHT_ROUNDS,
+        _ => 0,
+    };
+    let default_tv = prior == Prior::Tv && reweight_rounds == default_rounds;
+    crop == 0.25 && window == WindowShape::Square && default_tv && !noise_weighted
 }
 
 /// A time measured on a frame of `pixels`, scaled to the tables' 768² frame.

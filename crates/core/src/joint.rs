@@ -40,12 +40,16 @@ pub enum Prior {
     Pnp,
 }
 
+/// Reweighting rounds of a TV run with `reweight_rounds` unset: one refresh halfway, which at
+/// `auto`'s pick gains 1–2 dB on flat-patch scenes and loses nothing on the smooth ones once
+/// paired with the trained spectral prior (docs/joint.md, "The defaults at auto's pick").
+pub const DEFAULT_REWEIGHT_ROUNDS: usize = 1;
+
 /// The spectral prior of the joint method (`[reconstruct.joint] spectral_prior`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum SpectralPrior {
     /// The paper's curvature penalty η‖D₂Bα‖², as the unmixer uses it.
-    #[default]
     Curvature,
     /// The Gaussian prior trained with the basis (`Basis::coefficient_prior`): the
     /// coefficients' variances over the training spectra against the misfit they leave.
@@ -83,8 +87,10 @@ pub struct JointConfig {
     /// λ as a fraction of mean|y|·mean‖a‖·mean ω (the TV weight free of the frame's, the
     /// patterns' and the weights' scale); the discrepancy search starts from it.
     pub tv_weight: f64,
-    /// The spectral prior on each pixel's α: the paper's curvature (η), or trained with the basis.
-    pub spectral_prior: SpectralPrior,
+    /// The spectral prior on each pixel's α: the paper's curvature (η), or trained with the
+    /// basis. Unset: the trained one where the design has it, else the curvature (the
+    /// reconstructor resolves it; docs/joint.md, "The defaults at auto's pick").
+    pub spectral_prior: Option<SpectralPrior>,
     /// τ/σ balance: τ = ratio·s/L, σ = 1/(ratio·s·L), s = mean|α₀|/λ (α's scale over the dual's).
     pub step_ratio: f64,
     /// Take the balance s again from the iterate halfway through the run (τ, σ and the
@@ -116,9 +122,10 @@ pub struct JointConfig {
     /// Reweighted TV (Candès, Wakin & Boyd 2008): the iterations run in `reweight_rounds` + 1
     /// equal stages, and after each stage but the last the TV weight of pixel p becomes
     /// ε/(e_p + ε), e_p the excess of ‖∇α(p)‖ over its 3 × 3 mean, so jumps are penalised
-    /// less. 0 (the default) is plain TV: reweighting gains on piecewise-constant scenes and
-    /// loses a little on smoothly shaded ones (docs/joint.md).
-    pub reweight_rounds: usize,
+    /// less; 0 is plain TV. Unset: one round with the TV prior, a fixed λ and two or more
+    /// iterations, else none ([`JointConfig::rounds`]; docs/joint.md, "The defaults at auto's
+    /// pick").
+    pub reweight_rounds: Option<usize>,
     /// ε of the reweighting as a multiple of the mean ‖∇α(p)‖ over the pixels.
     pub reweight_eps: f64,
     /// Set to zero each value of the constraint's dual r whose size falls under
@@ -138,7 +145,7 @@ impl Default for JointConfig {
         JointConfig {
             iterations: 100,
             tv_weight: 0.02,
-            spectral_prior: SpectralPrior::Curvature,
+            spectral_prior: None,
             step_ratio: 1.0,
             rebalance: false,
             relaxation: 1.8,
@@ -150,7 +157,7 @@ impl Default for JointConfig {
             pnp_edge: 1.0,
             pnp_passes: 4,
             pnp_nonnegative: true,
-            reweight_rounds: 0,
+            reweight_rounds: None,
             reweight_eps: 0.03,
             dual_flush: 1e-2,
             trace_objective: false,
@@ -159,6 +166,22 @@ impl Default for JointConfig {
 }
 
 impl JointConfig {
+    /// The reweighting rounds a run makes: the key's value, or unset one round with the TV
+    /// prior, a fixed λ and two or more iterations to split, and none otherwise (the
+    /// discrepancy rule fits its residual under the weights it searched with).
+    pub fn rounds(&self) -> usize {
+        let fixed = self.weight_rule == WeightRule::Fixed;
+        let splits = self.prior == Prior::Tv && fixed && self.iterations >= 2;
+        let default = if splits { DEFAULT_REWEIGHT_ROUNDS } else { 0 };
+        self.reweight_rounds.unwrap_or(default)
+    }
+
+    /// The spectral prior's name for the stats: the key's value, or "given" when unset (the
+    /// matrix passed to [`Joint::new`] is then whatever its caller chose).
+    pub fn spectral_prior_name(&self) -> &'static str {
+        self.spectral_prior.map_or("given", SpectralPrior::name)
+    }
+
     /// Range checks; errors name `reconstruct.joint.<field>` and the value.
     pub fn validate(&self, file: &str) -> Result<()> {
         let key = |f: &str| format!("reconstruct.joint.{f}");
@@ -166,7 +189,7 @@ impl JointConfig {
             ("iterations", self.iterations, "iterations"),
             ("search_iterations", self.search_iterations, "iterations"),
             ("pnp_passes", self.pnp_passes, "passes"),
-            ("reweight_rounds", self.reweight_rounds, "rounds"),
+            ("reweight_rounds", self.rounds(), "rounds"),
         ] {
             check_count(file, &key(field), v, 0..=100_000, unit)?;
         }
@@ -213,22 +236,22 @@ impl JointConfig {
                 ));
             }
         }
-        if self.reweight_rounds > 0 && self.reweight_rounds >= self.iterations {
+        if self.rounds() > 0 && self.rounds() >= self.iterations {
             return Err(Error::config(
                 file,
                 &key("reweight_rounds"),
-                self.reweight_rounds,
+                self.rounds(),
                 &format!(
                     "needs fewer rounds than iterations ({}): the run is split into rounds + 1 stages of at least one iteration each",
                     self.iterations
                 ),
             ));
         }
-        if self.prior == Prior::Pnp && self.reweight_rounds > 0 {
+        if self.prior == Prior::Pnp && self.rounds() > 0 {
             return Err(Error::config(
                 file,
                 &key("reweight_rounds"),
-                self.reweight_rounds,
+                self.rounds(),
                 "applies to prior = \"tv\" only (plug-and-play has no TV weights)",
             ));
         }
@@ -290,8 +313,9 @@ pub struct JointStats {
     /// "tv" or "pnp".
     #[serde(default)]
     pub prior: String,
-    /// The spectral prior on α: "curvature" (the paper's η) or "trained" (empty in reports
-    /// made before it existed, which ran the curvature).
+    /// The spectral prior on α: "curvature" (the paper's η), "trained", or "given" (a matrix
+    /// passed to [`Joint::new`] with the key unset); empty in reports made before it existed,
+    /// which ran the curvature.
     #[serde(default)]
     pub spectral_prior: String,
     /// Σ_p ω_p(y_p − a_pᵀα_p)² / #{p: ω_p > 0} at the end: ≈ 1 when the fit matches the noise.
@@ -1104,7 +1128,7 @@ impl Joint {
             WeightRule::Discrepancy => Some(discrepancy::choose(self, &mut st)?),
         };
         let stages = Stages {
-            reweights: self.cfg.reweight_rounds,
+            reweights: self.cfg.rounds(),
             rebalance: self.cfg.rebalance,
         };
         let objective = self.iterate(&mut st, self.cfg.iterations, stages)?;
@@ -1210,11 +1234,11 @@ impl Joint {
             violation: 0.0,
             seconds: t0.elapsed().as_secs_f64(),
             prior: format!("{:?}", self.cfg.prior).to_lowercase(),
-            spectral_prior: self.cfg.spectral_prior.name().into(),
+            spectral_prior: self.cfg.spectral_prior_name().into(),
             residual_ratio: sum / n.max(1) as f64,
             noise_weights,
             saturated_pixels: st.cap.iter().filter(|c| c.is_finite()).count(),
-            reweight_rounds: self.cfg.reweight_rounds,
+            reweight_rounds: self.cfg.rounds(),
             discrepancy: None,
             fixed_point: Vec::new(),
         })
@@ -2248,7 +2272,7 @@ mod tests {
             let cfg = JointConfig {
                 iterations: 1200,
                 tv_weight: 1e-2,
-                reweight_rounds: rounds,
+                reweight_rounds: Some(rounds),
                 ..Default::default()
             };
             let j = solver(32, 0.0, cfg);
@@ -2536,7 +2560,7 @@ mod tests {
         for reweight_rounds in [0, 3] {
             stiff_runs_stay_finite(&JointConfig {
                 iterations: 200,
-                reweight_rounds,
+                reweight_rounds: Some(reweight_rounds),
                 ..Default::default()
             });
         }
@@ -2591,7 +2615,7 @@ mod tests {
             (
                 // 10 rounds in 5 iterations refreshed 4 times and reported 10.
                 JointConfig {
-                    reweight_rounds: 10,
+                    reweight_rounds: Some(10),
                     iterations: 5,
                     ..cfg.clone()
                 },
@@ -2628,7 +2652,7 @@ mod tests {
             (
                 JointConfig {
                     prior: Prior::Pnp,
-                    reweight_rounds: 2,
+                    reweight_rounds: Some(2),
                     ..cfg.clone()
                 },
                 "`reconstruct.joint.reweight_rounds` = 2:",
@@ -2645,6 +2669,48 @@ mod tests {
             let e = refusal(&bad);
             assert!(e.contains(key), "{e}");
         }
+    }
+
+    /// Unset, the reweighting is one round exactly where a round can run and keeps its
+    /// promise (TV, a fixed λ, two or more iterations); a value set is taken as it is, and those
+    /// defaults are accepted where a set round is refused (plug-and-play, one iteration).
+    #[test]
+    fn the_default_reweighting_is_one_round_where_one_applies() {
+        let at = |iterations, prior, weight_rule| JointConfig {
+            iterations,
+            prior,
+            weight_rule,
+            ..Default::default()
+        };
+        let (tv, pnp, fixed, disc) = (
+            Prior::Tv,
+            Prior::Pnp,
+            WeightRule::Fixed,
+            WeightRule::Discrepancy,
+        );
+        assert_eq!(at(56, tv, fixed).rounds(), DEFAULT_REWEIGHT_ROUNDS);
+        assert_eq!(DEFAULT_REWEIGHT_ROUNDS, 1);
+        for (cfg, why) in [
+            (at(1, tv, fixed), "one iteration has nothing to split"),
+            (at(56, pnp, fixed), "plug-and-play has no TV weights"),
+            (
+                at(56, tv, disc),
+                "the discrepancy λ is searched without them",
+            ),
+        ] {
+            assert_eq!(cfg.rounds(), 0, "{why}");
+            cfg.validate("t.toml").unwrap();
+        }
+        let set = JointConfig {
+            reweight_rounds: Some(3),
+            ..at(56, tv, disc)
+        };
+        assert_eq!(set.rounds(), 3);
+        let plain = JointConfig {
+            reweight_rounds: Some(0),
+            ..at(56, tv, fixed)
+        };
+        assert_eq!(plain.rounds(), 0);
     }
 
     /// A run that ends above its seed's objective is named, with the remedy of its prior; one

@@ -317,13 +317,18 @@ impl Reconstructor {
                     Some(w) => z_patterns.mix(w)?,
                     None => z_patterns,
                 };
+                let (prior, used) = joint_prior(cfg, design, file)?;
+                let joint_cfg = JointConfig {
+                    spectral_prior: Some(used),
+                    ..cfg.joint.clone()
+                };
                 Some(
                     Joint::new(
                         &channel_patterns,
                         &design.system,
                         &design.basis,
-                        &joint_prior(cfg, design, file)?,
-                        &cfg.joint,
+                        &prior,
+                        &joint_cfg,
                         file,
                     )
                     .map_err(|e| e.within(file, "reconstruct.gap.method", "\"joint\""))?,
@@ -513,10 +518,20 @@ fn band_eta(cfg: &ReconConfig, design: &Design) -> f64 {
     cfg.eta / design.band_step_nm.powi(4)
 }
 
-/// The joint method's spectral prior: the paper's curvature penalty (η) or the basis's trained
-/// Gaussian prior (the design's; refused naming the key when the design has none).
-fn joint_prior(cfg: &ReconConfig, design: &Design, file: &str) -> Result<DMatrix<f64>> {
-    match cfg.joint.spectral_prior {
+/// The joint method's spectral prior and its name: the paper's curvature penalty (η) or the
+/// basis's trained Gaussian prior (the design's; refused naming the key when the design has
+/// none). Unset: the trained one where the design has it, else the curvature.
+fn joint_prior(
+    cfg: &ReconConfig,
+    design: &Design,
+    file: &str,
+) -> Result<(DMatrix<f64>, SpectralPrior)> {
+    let trained_if_any = match design.spectral_prior {
+        Some(_) => SpectralPrior::Trained,
+        None => SpectralPrior::Curvature,
+    };
+    let used = cfg.joint.spectral_prior.unwrap_or(trained_if_any);
+    let prior = match used {
         SpectralPrior::Curvature => Ok(curvature(&design.basis, band_eta(cfg, design))),
         SpectralPrior::Trained => design.spectral_prior.clone().ok_or_else(|| {
             Error::config(
@@ -526,7 +541,8 @@ fn joint_prior(cfg: &ReconConfig, design: &Design, file: &str) -> Result<DMatrix
                 "needs the design's trained prior, and a basis coefficient never varies over the training spectra (use \"curvature\")",
             )
         }),
-    }
+    }?;
+    Ok((prior, used))
 }
 
 /// The noise model the joint method uses: the design's when `noise_weights` is on; the
@@ -623,15 +639,22 @@ mod tests {
         let mut cfg = ReconConfig::default();
         let p = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.5, 4.0]));
         let design = two_vector_design(Some(p.clone()));
-        let curv = joint_prior(&cfg, &design, "rig.toml").unwrap();
-        assert_eq!(curv, curvature(&design.basis, cfg.eta / 1e4));
+        let untrained = two_vector_design(None);
+        // Unset: the trained prior where the design has one, else the curvature.
+        let trained = (p.clone(), SpectralPrior::Trained);
+        assert_eq!(joint_prior(&cfg, &design, "rig.toml").unwrap(), trained);
+        let curv = curvature(&design.basis, cfg.eta / 1e4);
+        let by_default = joint_prior(&cfg, &untrained, "rig.toml").unwrap();
+        assert_eq!(by_default, (curv.clone(), SpectralPrior::Curvature));
+        cfg.joint.spectral_prior = Some(SpectralPrior::Curvature);
+        assert_eq!(joint_prior(&cfg, &design, "rig.toml").unwrap().0, curv);
         assert!(
             curv.amax() < 1e-12,
             "a linear basis has no curvature: {curv}"
         );
-        cfg.joint.spectral_prior = SpectralPrior::Trained;
-        assert_eq!(joint_prior(&cfg, &design, "rig.toml").unwrap(), p);
-        let e = joint_prior(&cfg, &two_vector_design(None), "rig.toml")
+        cfg.joint.spectral_prior = Some(SpectralPrior::Trained);
+        assert_eq!(joint_prior(&cfg, &design, "rig.toml").unwrap(), trained);
+        let e = joint_prior(&cfg, &untrained, "rig.toml")
             .unwrap_err()
             .to_string();
         assert!(

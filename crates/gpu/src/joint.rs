@@ -12,8 +12,7 @@ use crate::gap;
 use crate::mix::GpuMix;
 use specmux_core::joint::discrepancy::{self, Search};
 use specmux_core::joint::{
-    normalised_weights, rebalances_before, reweights_before, Joint, JointStats, SpectralPrior,
-    WeightRule,
+    normalised_weights, rebalances_before, reweights_before, Joint, JointStats, WeightRule,
 };
 use specmux_core::noise::DataWeights;
 use std::sync::Mutex;
@@ -69,8 +68,8 @@ pub struct GpuJoint {
     relaxation: f64,
     /// `dual_flush` (reported in the stats).
     dual_flush: f64,
-    /// The spectral prior (reported in the stats).
-    spectral_prior: SpectralPrior,
+    /// The spectral prior's name (reported in the stats).
+    spectral_prior: &'static str,
     /// Times the TV weights are refreshed in a run (`reweight_rounds`; 0: plain TV).
     reweights: usize,
     j: usize,
@@ -218,8 +217,8 @@ impl GpuJoint {
             trace: t.config.trace_objective,
             relaxation: t.config.relaxation,
             dual_flush: t.config.dual_flush,
-            spectral_prior: t.config.spectral_prior,
-            reweights: t.config.reweight_rounds,
+            spectral_prior: t.config.spectral_prior_name(),
+            reweights: t.config.rounds(),
             j,
             nbp: t.padded_bands,
             npx,
@@ -553,7 +552,7 @@ impl GpuJoint {
             relaxation: Some(self.relaxation),
             dual_flush: Some(self.dual_flush),
             prior: "tv".into(),
-            spectral_prior: self.spectral_prior.name().into(),
+            spectral_prior: self.spectral_prior.into(),
             reweight_rounds: self.reweights,
             residual_ratio: f(tail + SCALARS + 4) * info.scale / info.positive.max(1) as f64,
             noise_weights: info.set,
@@ -635,10 +634,7 @@ impl Buffers {
             extremes: ctx.storage("joint cube extremes", 8),
             counter: ctx.storage("joint non-finite", 4),
             partials: ctx.storage("joint partials", 4 * groups as u64),
-            rw: ctx.storage(
-                "joint reweight means",
-                4 * (t.config.reweight_rounds as u64 + 2),
-            ),
+            rw: ctx.storage("joint reweight means", 4 * (t.config.rounds() as u64 + 2)),
             bal: ctx.storage(
                 "joint alpha means",
                 4 * (3 + discrepancy::MAX_TRIALS as u64 + 1),

@@ -370,7 +370,7 @@ fn an_untraced_run_keeps_the_objective_at_the_seed_and_the_end() {
 fn a_reweighted_run_matches_the_core() {
     let Some(ctx) = common::context() else { return };
     let reweighted = JointConfig {
-        reweight_rounds: 2,
+        reweight_rounds: Some(2),
         ..config(30)
     };
     let joint = solver_with(&reweighted, 1.0);
@@ -486,7 +486,7 @@ fn a_diagonal_spectral_prior_matches_the_core() {
     let (b, f) = basis_and_system();
     let p = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.01, 0.5, 2.0, 8.0]));
     let trained = JointConfig {
-        spectral_prior: SpectralPrior::Trained,
+        spectral_prior: Some(SpectralPrior::Trained),
         ..config(30)
     };
     let joint = Joint::new(&patterns(), &f, &b, &p, &trained, "t.toml").unwrap();

@@ -17,7 +17,7 @@ use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::gap::GapConfig;
 use specmux_core::gap::Method;
-use specmux_core::joint::{Prior, WeightRule};
+use specmux_core::joint::{JointConfig, Prior, WeightRule};
 use specmux_core::metrics;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
@@ -71,8 +71,9 @@ pub struct Setting {
     pub prior: Prior,
     /// The joint method's use of the camera's noise model; off for the other methods.
     pub noise: NoiseAware,
-    /// Reweighted TV: times the joint method's TV weights are refreshed (0: plain TV; 0 for
-    /// the other methods). `auto` never picks these rows (docs/joint.md, "Reweighted TV").
+    /// Reweighted TV: times the joint method's TV weights are refreshed (by default as
+    /// [`JointConfig::rounds`] says: once with TV at a fixed λ; 0 for the other methods).
+    /// `auto` never picks rows at other counts (docs/joint.md, "Reweighted TV").
     pub reweight_rounds: usize,
 }
 
@@ -105,6 +106,13 @@ impl Setting {
         }
     }
 
+    /// True for a joint row whose TV weights are refreshed other than by default (the bench's
+    /// reweighted series).
+    pub fn more_reweighting(&self) -> bool {
+        let default = default_rounds(self.iterations, self.prior, self.noise);
+        self.method == Method::Joint && self.reweight_rounds != default
+    }
+
     /// Short label, e.g. `gap-tv 20 it, crop 0.25 square`.
     pub fn label(&self) -> String {
         let m = match self.method {
@@ -112,7 +120,7 @@ impl Setting {
             Method::Gap => format!("gap {} it", self.iterations),
             Method::GapTv => format!("gap-tv {} it", self.iterations),
             Method::Joint if self.prior == Prior::Pnp => format!("pnp {} it", self.iterations),
-            Method::Joint if self.reweight_rounds > 0 => {
+            Method::Joint if self.more_reweighting() => {
                 format!("joint {} it reweighted", self.iterations)
             }
             Method::Joint => match self.noise {
@@ -222,13 +230,30 @@ pub fn gap_left_out(sim: &Simulated) -> Option<String> {
         .map(|e| format!("GAP's rows left out (the other methods take any side): {e}"))
 }
 
-/// The joint method with `prior` and `noise` (crop 0.25, square window).
+/// The joint method with `prior` and `noise` (crop 0.25, square window), reweighted as by
+/// default.
 fn joint_setting(iterations: usize, prior: Prior, noise: NoiseAware) -> Setting {
     Setting {
         prior,
         noise,
+        reweight_rounds: default_rounds(iterations, prior, noise),
         ..Setting::new(Method::Joint, iterations)
     }
+}
+
+/// The reweighting rounds of a joint run with `reweight_rounds` unset ([`JointConfig::rounds`]).
+fn default_rounds(iterations: usize, prior: Prior, noise: NoiseAware) -> usize {
+    let weight_rule = match noise {
+        NoiseAware::Discrepancy => WeightRule::Discrepancy,
+        _ => WeightRule::Fixed,
+    };
+    JointConfig {
+        iterations,
+        prior,
+        weight_rule,
+        ..JointConfig::default()
+    }
+    .rounds()
 }
 
 /// Where the work–precision runs go (`specmux bench --device`, `[compute] device`): the CPU,
@@ -464,7 +489,7 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
         Method::Joint => {
             exp.reconstruct.joint.iterations = s.iterations;
             exp.reconstruct.joint.prior = s.prior;
-            exp.reconstruct.joint.reweight_rounds = s.reweight_rounds;
+            exp.reconstruct.joint.reweight_rounds = Some(s.reweight_rounds);
             exp.reconstruct.joint.noise_weights = s.noise != NoiseAware::Off;
             if s.noise == NoiseAware::Discrepancy {
                 exp.reconstruct.joint.weight_rule = WeightRule::Discrepancy;
@@ -612,7 +637,14 @@ pub fn work_precision_plot(
         .filter(|r| {
             let s = &r.setting;
             let noise_weighted = s.noise != NoiseAware::Off;
-            auto::tabled(s.crop, s.window, s.prior, noise_weighted, s.reweight_rounds)
+            auto::tabled(
+                s.method,
+                s.crop,
+                s.window,
+                s.prior,
+                noise_weighted,
+                s.reweight_rounds,
+            )
         })
         .map(|r| auto::Entry {
             method: r.setting.method,
@@ -705,7 +737,7 @@ pub fn work_precision_plot(
                 .filter(|r| {
                     let s = &r.setting;
                     let series = (method, prior, noise, reweighted);
-                    (s.method, s.prior, s.noise, s.reweight_rounds > 0) == series
+                    (s.method, s.prior, s.noise, s.more_reweighting()) == series
                 })
                 .collect();
             if of_method.is_empty() {
@@ -1271,6 +1303,7 @@ mod tests {
         assert_ne!(rows[4].psnr_db, rows[2].psnr_db, "{rows:?}");
         let s = &grid[4];
         assert!(!auto::tabled(
+            s.method,
             s.crop,
             s.window,
             s.prior,

@@ -55,6 +55,7 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
     for (i, r) in report.rows.iter().enumerate() {
         let s = &r.setting;
         if !tabled(
+            s.method,
             s.crop,
             s.window,
             s.prior,
