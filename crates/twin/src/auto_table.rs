@@ -52,14 +52,27 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
         ))
     })?;
     let mut entries = Vec::new();
+    // Joint rows the table took before the joint reweighted by default: plain TV, otherwise
+    // as tabled (GAP's rule is exactly that).
+    let mut plain_joint_rows = false;
     for (i, r) in report.rows.iter().enumerate() {
         let s = &r.setting;
+        let noise = s.noise != "off";
+        let as_gap = tabled(
+            Method::Gap,
+            s.crop,
+            s.window,
+            s.prior,
+            noise,
+            s.reweight_rounds,
+        );
+        plain_joint_rows |= s.method == Method::Joint && as_gap;
         if !tabled(
             s.method,
             s.crop,
             s.window,
             s.prior,
-            s.noise != "off",
+            noise,
             s.reweight_rounds,
         ) {
             continue;
@@ -85,6 +98,12 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
             psnr_db: r.psnr_db,
         });
     }
+    if plain_joint_rows && !entries.iter().any(|e| e.method == Method::Joint) {
+        return Err(refuse(format!(
+            "{}'s joint rows are plain TV, as specmux bench wrote them before the joint's defaults reweighted once (2026-11-28): run specmux bench again",
+            path.display()
+        )));
+    }
     if entries.is_empty() {
         return Err(refuse(format!(
             "{} has no row at crop 0.25, square window, TV prior and no noise weights (the rows auto picks from)",
@@ -98,15 +117,16 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
 mod tests {
     use super::*;
 
-    /// A bench report of two usable rows at 384², one plug-and-play row and one reweighted TV
-    /// row (both left out; the rows without `reweight_rounds` are plain, as in older reports).
+    /// A bench report of two usable rows at 384² (the joint's at its default reweighting), one
+    /// plug-and-play row and one reweighted TV row (both left out; the rows without
+    /// `reweight_rounds` are plain, as in older reports).
     const REPORT: &str = r#"{"schema_version": 1, "rows": [
         {"label": "gap 20 it", "setting": {"method": "gap", "iterations": 20, "crop": 0.25,
          "window": "square", "prior": "tv", "noise": "off"}, "psnr_db": 17.2, "seconds": 0.1,
          "frame": [384, 384]},
         {"label": "joint 40 it", "setting": {"method": "joint", "iterations": 40, "crop": 0.25,
-         "window": "square", "prior": "tv", "noise": "off"}, "psnr_db": 22.9, "seconds": 0.5,
-         "frame": [384, 384]},
+         "window": "square", "prior": "tv", "noise": "off", "reweight_rounds": 1},
+         "psnr_db": 22.9, "seconds": 0.5, "frame": [384, 384]},
         {"label": "pnp 80 it", "setting": {"method": "joint", "iterations": 80, "crop": 0.25,
          "window": "square", "prior": "pnp", "noise": "off"}, "psnr_db": 23.7, "seconds": 2.0,
          "frame": [384, 384]},
@@ -142,8 +162,14 @@ mod tests {
         let old = REPORT.replace(r#""frame": [384, 384]"#, r#""x": 0"#);
         let none = REPORT.replace(r#""prior": "tv""#, r#""prior": "pnp""#);
         let nan = REPORT.replace(r#""seconds": 0.1"#, r#""seconds": -1"#);
+        let plain = REPORT.replace(
+            r#""noise": "off", "reweight_rounds": 1}"#,
+            r#""noise": "off"}"#,
+        );
+        assert_ne!(plain, REPORT);
         for (name, text, why) in [
             ("old.json", old.as_str(), "no frame size"),
+            ("plain.json", plain.as_str(), "joint rows are plain TV"),
             ("none.json", none.as_str(), "no row at crop 0.25"),
             ("neg.json", nan.as_str(), "time -1 s"),
             ("junk.json", "{", "not a specmux bench report"),
