@@ -19,126 +19,126 @@ pub struct Entry {
 }
 
 /// Measured with `RAYON_NUM_THREADS=2 specmux bench dead-leaves --repeats 5` on 2026-11-28
-/// (release build of commit bd80454, 768², the crop-0.25 square-window rows with the TV prior, the
-/// joint rows at its defaults since that commit — the trained spectral prior, one reweighting
+/// (release build of commit 60fc036, 768², the crop-0.25 square-window rows with the TV prior,
+/// the joint rows at its defaults since bd80454 — the trained spectral prior, one reweighting
 /// round — on the 2-core build machine, idle before the run; docs/results.md, `method =
 /// "auto"`). It replaced the table of 787cb85, whose joint rows were plain TV with the
-/// curvature prior (the same time per iteration, 0.05–2.3 dB lower). Re-measure on the machine
-/// the budget is meant for (`[reconstruct] auto_table`): this machine's speed varies by up to
-/// 1.6× between days.
+/// curvature prior (the same time per iteration; 0.05 dB more at 10 it, 1.05–2.28 dB less from
+/// 20 it on). Re-measure on the machine the budget is meant for (`[reconstruct] auto_table`):
+/// this machine's speed varies by up to 1.6× between days.
 pub const TABLE: &[Entry] = &[
     Entry {
         method: Method::Fourier,
         iterations: 0,
-        seconds: 0.2315,
+        seconds: 0.2272,
         psnr_db: 13.96,
     },
     Entry {
         method: Method::Gap,
         iterations: 1,
-        seconds: 0.2366,
+        seconds: 0.2303,
         psnr_db: 15.49,
     },
     Entry {
         method: Method::Gap,
         iterations: 2,
-        seconds: 0.2322,
+        seconds: 0.2214,
         psnr_db: 15.91,
     },
     Entry {
         method: Method::Gap,
         iterations: 5,
-        seconds: 0.2825,
+        seconds: 0.2467,
         psnr_db: 16.90,
     },
     Entry {
         method: Method::Gap,
         iterations: 10,
-        seconds: 0.3564,
+        seconds: 0.3505,
         psnr_db: 17.17,
     },
     Entry {
         method: Method::Gap,
         iterations: 20,
-        seconds: 0.5861,
+        seconds: 0.5315,
         psnr_db: 17.25,
     },
     Entry {
         method: Method::Gap,
         iterations: 50,
-        seconds: 1.1905,
+        seconds: 1.1370,
         psnr_db: 17.28,
     },
     Entry {
         method: Method::GapTv,
         iterations: 1,
-        seconds: 0.3324,
+        seconds: 0.3106,
         psnr_db: 14.39,
     },
     Entry {
         method: Method::GapTv,
         iterations: 2,
-        seconds: 0.3979,
+        seconds: 0.3706,
         psnr_db: 15.31,
     },
     Entry {
         method: Method::GapTv,
         iterations: 5,
-        seconds: 0.5370,
+        seconds: 0.4884,
         psnr_db: 16.19,
     },
     Entry {
         method: Method::GapTv,
         iterations: 10,
-        seconds: 0.7684,
+        seconds: 0.7449,
         psnr_db: 17.24,
     },
     Entry {
         method: Method::GapTv,
         iterations: 20,
-        seconds: 1.3369,
+        seconds: 1.2371,
         psnr_db: 18.83,
     },
     Entry {
         method: Method::GapTv,
         iterations: 50,
-        seconds: 3.1151,
+        seconds: 2.8658,
         psnr_db: 21.35,
     },
     Entry {
         method: Method::Joint,
         iterations: 10,
-        seconds: 0.4509,
+        seconds: 0.3985,
         psnr_db: 20.40,
     },
     Entry {
         method: Method::Joint,
         iterations: 15,
-        seconds: 0.5242,
+        seconds: 0.4924,
         psnr_db: 22.17,
     },
     Entry {
         method: Method::Joint,
         iterations: 20,
-        seconds: 0.6066,
+        seconds: 0.5739,
         psnr_db: 23.23,
     },
     Entry {
         method: Method::Joint,
         iterations: 30,
-        seconds: 0.7434,
+        seconds: 0.7366,
         psnr_db: 24.00,
     },
     Entry {
         method: Method::Joint,
         iterations: 40,
-        seconds: 0.8831,
+        seconds: 0.8509,
         psnr_db: 24.62,
     },
     Entry {
         method: Method::Joint,
         iterations: 80,
-        seconds: 1.3528,
+        seconds: 1.3297,
         psnr_db: 25.56,
     },
 ];
@@ -515,10 +515,10 @@ mod tests {
     #[test]
     fn the_committed_table_picks_what_the_docs_say() {
         for (budget, iterations, from) in [
-            // 40 + ⌊(1 − 0.8831)/(1.3528 − 0.8831) · 40⌋ = 49.
-            (default_budget(REFERENCE_PIXELS), 49, Some([40, 80])),
-            // 20 + ⌊(0.7 − 0.6066)/(0.7434 − 0.6066) · 10⌋ = 26.
-            (0.7, 26, Some([20, 30])),
+            // 40 + ⌊(1 − 0.8509)/(1.3297 − 0.8509) · 40⌋ = 52.
+            (default_budget(REFERENCE_PIXELS), 52, Some([40, 80])),
+            // 20 + ⌊(0.7 − 0.5739)/(0.7366 − 0.5739) · 10⌋ = 27.
+            (0.7, 27, Some([20, 30])),
             (1.4, 80, None),
         ] {
             let c = pick_from(CPU, budget, REFERENCE_PIXELS).unwrap();
