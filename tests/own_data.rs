@@ -85,6 +85,10 @@ fn auto_says_which_device_table_it_picked_from() {
         text.contains("joint: ") && text.contains("joint prior tv"),
         "{text}"
     );
+    // At its defaults: the design's trained spectral prior, the TV weights refreshed once.
+    assert_eq!(report["joint"]["spectral_prior"], "trained", "{json}");
+    assert_eq!(report["joint"]["reweight_rounds"], 1, "{json}");
+    assert!(text.contains("(spectral: trained)"), "{text}");
     // With `[reconstruct] auto_table` it picks from a bench report of this machine instead.
     ok(
         d,

@@ -773,23 +773,17 @@ pub fn work_precision_plot(
         let points: Vec<(f64, f64)> = front.iter().map(|r| (r.seconds.ln(), r.psnr_db)).collect();
         let spans = ((x1 / x0).ln(), p1 - p0 + 2.0 * pad);
         let spots = label_spots(&points, &labels, spans, pad);
-        // A label moved off its first spot (right of and just below its point) is tied to its
-        // point by a thin line, so close points do not swap names.
-        let leaders = points
-            .iter()
-            .zip(&spots)
-            .filter_map(|(&(x, y), &(sx, sy))| {
-                let moved = (sy - (y - 0.15 * pad)).abs() > 1e-9;
-                let middle = sy - 8.0 / 560.0 * spans.1;
-                moved.then(|| PathElement::new(vec![(x, y), (sx, middle)], BLACK.mix(0.6)))
-            });
+        // A label moved off its first spot is tied to its point by a thin line.
+        let leaders = points.iter().zip(&spots).filter_map(|(&p, &(_, leader))| {
+            leader.map(|end| PathElement::new(vec![p, end], BLACK.mix(0.6)))
+        });
         chart.draw_series(leaders).map_err(|x| e(&x))?;
         chart
             .draw_series(
                 labels
                     .iter()
                     .zip(spots)
-                    .map(|(l, at)| Text::new(l.clone(), at, ("sans-serif", 13))),
+                    .map(|(l, (at, _))| Text::new(l.clone(), at, ("sans-serif", 13))),
             )
             .map_err(|x| e(&x))?;
         // At the pick's predicted time and PSNR: a measured point, or one interpolated between
@@ -863,36 +857,50 @@ fn seconds_label(t: f64) -> String {
     format!("{t:.decimals$}")
 }
 
-/// Where each Pareto label goes (its top-left corner): right of and just below its point, or
-/// above the point, or below the label before it, where the first choice would cover a label
-/// already placed. Sizes are estimated from the 13-px font on the plot's ~880 × 560 px area
-/// spanning `spans` (ln seconds, dB).
+/// Where each Pareto label goes: its top-left corner, and where a line from its point meets
+/// it when it is not at its first spot. The first spot is right of and just below the point;
+/// where that would cover a label already placed or another point, above the point, then left
+/// of it (the front rises to the right, so up and left of a point is free of others), then below
+/// the label before it. Sizes are estimated from the 13-px font and 5-px dots on the plot's
+/// ~880 × 560 px area spanning `spans` (ln seconds, dB).
 fn label_spots(
     points: &[(f64, f64)],
     labels: &[String],
     spans: (f64, f64),
     pad: f64,
-) -> Vec<(f64, f64)> {
+) -> Vec<((f64, f64), Option<(f64, f64)>)> {
     let h = 16.0 / 560.0 * spans.1;
+    let dot = (6.0 / 880.0 * spans.0, 6.0 / 560.0 * spans.1);
     let mut placed: Vec<(f64, f64, f64)> = Vec::new();
-    for (&(x, y), label) in points.iter().zip(labels) {
-        let (x, w) = (
-            x + 0.04,
-            label.chars().count() as f64 * 7.0 / 880.0 * spans.0,
-        );
-        let covers = |ty: f64| {
-            placed
+    let mut spots = Vec::new();
+    for (i, (&(px, py), label)) in points.iter().zip(labels).enumerate() {
+        let w = label.chars().count() as f64 * 7.0 / 880.0 * spans.0;
+        let free = |&(x, ty): &(f64, f64)| {
+            let on_label = placed
                 .iter()
-                .any(|&(px, py, pw)| x < px + pw && px < x + w && (ty - py).abs() < h)
+                .any(|&(lx, ly, lw)| x < lx + lw && lx < x + w && (ty - ly).abs() < h);
+            let on_point = points.iter().enumerate().any(|(j, &(qx, qy))| {
+                let inside_x = qx + dot.0 > x && qx - dot.0 < x + w;
+                j != i && inside_x && qy + dot.1 > ty - h && qy - dot.1 < ty
+            });
+            !on_label && !on_point
         };
-        let below_last = placed.last().map_or(y, |&(_, py, _)| py - 1.05 * h);
-        let ty = [y - 0.15 * pad, y + 1.1 * h, below_last]
-            .into_iter()
-            .find(|&ty| !covers(ty))
-            .unwrap_or(y - 0.15 * pad);
+        let right = px + 0.04;
+        let below_last = placed.last().map_or(py, |&(_, ly, _)| ly - 1.05 * h);
+        let first = (right, py - 0.15 * pad);
+        let candidates = [
+            first,
+            (right, py + 1.1 * h),
+            (px - 0.04 - w, py + 0.5 * h),
+            (right, below_last),
+        ];
+        let (x, ty) = candidates.into_iter().find(free).unwrap_or(first);
+        let meets = if x < px { x + w } else { x };
+        let leader = ((x, ty) != first).then_some((meets, ty - 0.5 * h));
         placed.push((x, ty, w));
+        spots.push(((x, ty), leader));
     }
-    placed.into_iter().map(|(x, y, _)| (x, y)).collect()
+    spots
 }
 
 /// A legend entry with the devices its rows ran on, in a bench where some row ran elsewhere
@@ -1209,9 +1217,15 @@ mod tests {
         // Two points on top of each other, then one far away.
         let pts = [(0.0, 17.0), (0.01, 17.02), (3.0, 22.0)];
         let spots = label_spots(&pts, &labels, spans, 0.5);
-        assert_eq!(spots[0], (0.04, 17.0 - 0.075));
-        assert!((spots[1].1 - spots[0].1).abs() >= h, "{spots:?}");
-        assert_eq!(spots[2], (3.04, 22.0 - 0.075));
+        assert_eq!(spots[0], ((0.04, 17.0 - 0.075), None));
+        let ((x1, y1), leader) = spots[1];
+        assert!((y1 - spots[0].0 .1).abs() >= h, "{spots:?}");
+        assert_eq!(
+            leader,
+            Some((x1, y1 - 0.5 * h)),
+            "a moved label is tied to its point"
+        );
+        assert_eq!(spots[2], ((3.04, 22.0 - 0.075), None));
     }
 
     #[test]
