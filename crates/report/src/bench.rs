@@ -774,8 +774,9 @@ pub fn work_precision_plot(
         let spans = ((x1 / x0).ln(), p1 - p0 + 2.0 * pad);
         let spots = label_spots(&points, &labels, spans, pad);
         // A label moved off its first spot is tied to its point by a thin line.
-        let leaders = points.iter().zip(&spots).filter_map(|(&p, &(_, leader))| {
-            leader.map(|end| PathElement::new(vec![p, end], BLACK.mix(0.6)))
+        let leaders = points.iter().zip(&spots).filter_map(|(&p, spot)| {
+            let end = spot.leader?;
+            Some(PathElement::new(vec![p, end], BLACK.mix(0.6)))
         });
         chart.draw_series(leaders).map_err(|x| e(&x))?;
         chart
@@ -783,7 +784,7 @@ pub fn work_precision_plot(
                 labels
                     .iter()
                     .zip(spots)
-                    .map(|(l, (at, _))| Text::new(l.clone(), at, ("sans-serif", 13))),
+                    .map(|(l, spot)| Text::new(l.clone(), spot.at, ("sans-serif", 13))),
             )
             .map_err(|x| e(&x))?;
         // At the pick's predicted time and PSNR: a measured point, or one interpolated between
@@ -857,8 +858,15 @@ fn seconds_label(t: f64) -> String {
     format!("{t:.decimals$}")
 }
 
-/// Where each Pareto label goes: its top-left corner, and where a line from its point meets
-/// it when it is not at its first spot. The first spot is right of and just below the point;
+/// Where a Pareto label goes: its top-left corner, and where a line from its point meets it
+/// when it is not at its first spot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LabelSpot {
+    at: (f64, f64),
+    leader: Option<(f64, f64)>,
+}
+
+/// Where each Pareto label goes ([`LabelSpot`]). The first spot is right of and just below the point;
 /// where that would cover a label already placed or another point, above the point, then left
 /// of it (the front rises to the right, so up and left of a point is free of others), then below
 /// the label before it. Sizes are estimated from the 13-px font and 5-px dots on the plot's
@@ -868,7 +876,7 @@ fn label_spots(
     labels: &[String],
     spans: (f64, f64),
     pad: f64,
-) -> Vec<((f64, f64), Option<(f64, f64)>)> {
+) -> Vec<LabelSpot> {
     let h = 16.0 / 560.0 * spans.1;
     let dot = (6.0 / 880.0 * spans.0, 6.0 / 560.0 * spans.1);
     let mut placed: Vec<(f64, f64, f64)> = Vec::new();
@@ -898,7 +906,10 @@ fn label_spots(
         let meets = if x < px { x + w } else { x };
         let leader = ((x, ty) != first).then_some((meets, ty - 0.5 * h));
         placed.push((x, ty, w));
-        spots.push(((x, ty), leader));
+        spots.push(LabelSpot {
+            at: (x, ty),
+            leader,
+        });
     }
     spots
 }
@@ -1217,15 +1228,13 @@ mod tests {
         // Two points on top of each other, then one far away.
         let pts = [(0.0, 17.0), (0.01, 17.02), (3.0, 22.0)];
         let spots = label_spots(&pts, &labels, spans, 0.5);
-        assert_eq!(spots[0], ((0.04, 17.0 - 0.075), None));
-        let ((x1, y1), leader) = spots[1];
-        assert!((y1 - spots[0].0 .1).abs() >= h, "{spots:?}");
-        assert_eq!(
-            leader,
-            Some((x1, y1 - 0.5 * h)),
-            "a moved label is tied to its point"
-        );
-        assert_eq!(spots[2], ((3.04, 22.0 - 0.075), None));
+        let unmoved = |at| LabelSpot { at, leader: None };
+        assert_eq!(spots[0], unmoved((0.04, 17.0 - 0.075)));
+        let (x1, y1) = spots[1].at;
+        assert!((y1 - spots[0].at.1).abs() >= h, "{spots:?}");
+        let tied = Some((x1, y1 - 0.5 * h));
+        assert_eq!(spots[1].leader, tied, "a moved label is tied to its point");
+        assert_eq!(spots[2], unmoved((3.04, 22.0 - 0.075)));
     }
 
     #[test]
