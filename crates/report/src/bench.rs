@@ -866,11 +866,11 @@ struct LabelSpot {
     leader: Option<(f64, f64)>,
 }
 
-/// Where each Pareto label goes ([`LabelSpot`]). The first spot is right of and just below the point;
-/// where that would cover a label already placed or another point, above the point, then left
-/// of it (the front rises to the right, so up and left of a point is free of others), then below
-/// the label before it. Sizes are estimated from the 13-px font and 5-px dots on the plot's
-/// ~880 × 560 px area spanning `spans` (ln seconds, dB).
+/// Where each Pareto label goes ([`LabelSpot`]). The first spot is right of and just below
+/// the point; where that would cover a label already placed or another point, above the point,
+/// then left of it (the front rises to the right, so up and left of a point is free of
+/// others), then below the label before it. Sizes are estimated from the 13-px font and 5-px
+/// dots on the plot's ~880 × 560 px area spanning `spans` (ln seconds, dB).
 fn label_spots(
     points: &[(f64, f64)],
     labels: &[String],
@@ -1235,6 +1235,24 @@ mod tests {
         let tied = Some((x1, y1 - 0.5 * h));
         assert_eq!(spots[1].leader, tied, "a moved label is tied to its point");
         assert_eq!(spots[2], unmoved((3.04, 22.0 - 0.075)));
+    }
+
+    /// A label whose first spot is taken by its neighbour's label and whose spot above holds the
+    /// next point goes left of its point, tied to it at the label's right end.
+    #[test]
+    fn a_label_boxed_in_on_the_right_goes_left_of_its_point() {
+        let labels = vec!["gap 20 it".to_string(); 3];
+        let spans = (4.0, 10.0);
+        let (h, w) = (16.0 / 560.0 * spans.1, 9.0 * 7.0 / 880.0 * spans.0);
+        let pts = [(0.0, 17.0), (0.01, 17.05), (0.1, 17.4)];
+        let spot = label_spots(&pts, &labels, spans, 0.5)[1];
+        let (x, y) = spot.at;
+        assert!((x - (0.01 - 0.04 - w)).abs() < 1e-12 && (y - (17.05 + 0.5 * h)).abs() < 1e-12);
+        let (lx, ly) = spot.leader.unwrap();
+        assert!(
+            (lx - (0.01 - 0.04)).abs() < 1e-12 && (ly - 17.05).abs() < 1e-12,
+            "{spot:?}"
+        );
     }
 
     #[test]
