@@ -57,24 +57,13 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
     let mut plain_joint_rows = false;
     for (i, r) in report.rows.iter().enumerate() {
         let s = &r.setting;
-        let noise = s.noise != "off";
-        let as_gap = tabled(
-            Method::Gap,
-            s.crop,
-            s.window,
-            s.prior,
-            noise,
-            s.reweight_rounds,
-        );
-        plain_joint_rows |= s.method == Method::Joint && as_gap;
-        if !tabled(
-            s.method,
-            s.crop,
-            s.window,
-            s.prior,
-            noise,
-            s.reweight_rounds,
-        ) {
+        // The table's rule for method `m` on this row's other settings.
+        let takes = |m| {
+            let noise = s.noise != "off";
+            tabled(m, s.crop, s.window, s.prior, noise, s.reweight_rounds)
+        };
+        plain_joint_rows |= s.method == Method::Joint && takes(Method::Gap);
+        if !takes(s.method) {
             continue;
         }
         let Some([w, h]) = r.frame.filter(|[w, h]| w * h > 0) else {
