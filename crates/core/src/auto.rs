@@ -5,7 +5,7 @@
 
 use crate::demux::WindowShape;
 use crate::gap::Method;
-use crate::joint::{Prior, DEFAULT_REWEIGHT_ROUNDS};
+use crate::joint::{self, Prior, WeightRule};
 use serde::Serialize;
 
 /// One measured setting (crop 0.25, square window): median seconds of the whole reconstruction
@@ -273,10 +273,12 @@ pub struct Choice {
 }
 
 /// True for the bench rows the tables hold: crop 0.25, square window, the TV prior, no noise
-/// weights, and the joint method at its default reweighting (`specmux bench` and
-/// `[reconstruct] auto_table` select them alike).
+/// weights, and the joint method at its default reweighting for `iterations`
+/// ([`joint::default_rounds`]) (`specmux bench` and `[reconstruct] auto_table` select them
+/// alike).
 pub fn tabled(
     method: Method,
+    iterations: usize,
     crop: f64,
     window: WindowShape,
     prior: Prior,
@@ -284,7 +286,7 @@ pub fn tabled(
     reweight_rounds: usize,
 ) -> bool {
     let default_rounds = match method {
-        Method::Joint => DEFAULT_REWEIGHT_ROUNDS,
+        Method::Joint => joint::default_rounds(iterations, prior, WeightRule::Fixed),
         _ => 0,
     };
     let default_tv = prior == Prior::Tv && reweight_rounds == default_rounds;

@@ -45,6 +45,19 @@ pub enum Prior {
 /// paired with the trained spectral prior (docs/joint.md, "The defaults at auto's pick").
 pub const DEFAULT_REWEIGHT_ROUNDS: usize = 1;
 
+/// The reweighting rounds of a run with `reweight_rounds` unset: [`DEFAULT_REWEIGHT_ROUNDS`]
+/// with the TV prior, a fixed λ and two or more iterations to split, and none otherwise
+/// (plug-and-play has no TV weights; the discrepancy rule fits its residual under the weights
+/// it searched with).
+pub fn default_rounds(iterations: usize, prior: Prior, weight_rule: WeightRule) -> usize {
+    let splits = prior == Prior::Tv && weight_rule == WeightRule::Fixed && iterations >= 2;
+    if splits {
+        DEFAULT_REWEIGHT_ROUNDS
+    } else {
+        0
+    }
+}
+
 /// The spectral prior of the joint method (`[reconstruct.joint] spectral_prior`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -166,14 +179,10 @@ impl Default for JointConfig {
 }
 
 impl JointConfig {
-    /// The reweighting rounds a run makes: the key's value, or unset one round with the TV
-    /// prior, a fixed λ and two or more iterations to split, and none otherwise (the
-    /// discrepancy rule fits its residual under the weights it searched with).
+    /// The reweighting rounds a run makes: the key's value, or unset [`default_rounds`].
     pub fn rounds(&self) -> usize {
-        let fixed = self.weight_rule == WeightRule::Fixed;
-        let splits = self.prior == Prior::Tv && fixed && self.iterations >= 2;
-        let default = if splits { DEFAULT_REWEIGHT_ROUNDS } else { 0 };
-        self.reweight_rounds.unwrap_or(default)
+        let default = || default_rounds(self.iterations, self.prior, self.weight_rule);
+        self.reweight_rounds.unwrap_or_else(default)
     }
 
     /// The spectral prior's name for the stats: the key's value, or "given" when unset (the

@@ -17,7 +17,7 @@ use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::gap::GapConfig;
 use specmux_core::gap::Method;
-use specmux_core::joint::{JointConfig, Prior, WeightRule};
+use specmux_core::joint::{self, Prior, WeightRule};
 use specmux_core::metrics;
 use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
 use specmux_core::spectral::Library;
@@ -72,7 +72,7 @@ pub struct Setting {
     /// The joint method's use of the camera's noise model; off for the other methods.
     pub noise: NoiseAware,
     /// Reweighted TV: times the joint method's TV weights are refreshed (by default as
-    /// [`JointConfig::rounds`] says: once with TV at a fixed λ; 0 for the other methods).
+    /// [`joint::default_rounds`] says: once with TV at a fixed λ; 0 for the other methods).
     /// `auto` never picks rows at other counts (docs/joint.md, "Reweighted TV").
     pub reweight_rounds: usize,
 }
@@ -242,19 +242,14 @@ fn joint_setting(iterations: usize, prior: Prior, noise: NoiseAware) -> Setting 
     }
 }
 
-/// The reweighting rounds of a joint run with `reweight_rounds` unset ([`JointConfig::rounds`]).
+/// The reweighting rounds of a joint run with `reweight_rounds` unset and `noise`'s λ rule
+/// ([`joint::default_rounds`]).
 fn default_rounds(iterations: usize, prior: Prior, noise: NoiseAware) -> usize {
     let weight_rule = match noise {
         NoiseAware::Discrepancy => WeightRule::Discrepancy,
         _ => WeightRule::Fixed,
     };
-    JointConfig {
-        iterations,
-        prior,
-        weight_rule,
-        ..JointConfig::default()
-    }
-    .rounds()
+    joint::default_rounds(iterations, prior, weight_rule)
 }
 
 /// Where the work–precision runs go (`specmux bench --device`, `[compute] device`): the CPU,
@@ -640,6 +635,7 @@ pub fn work_precision_plot(
             let noise_weighted = s.noise != NoiseAware::Off;
             auto::tabled(
                 s.method,
+                s.iterations,
                 s.crop,
                 s.window,
                 s.prior,
@@ -1359,6 +1355,7 @@ mod tests {
         let s = &grid[4];
         assert!(!auto::tabled(
             s.method,
+            s.iterations,
             s.crop,
             s.window,
             s.prior,

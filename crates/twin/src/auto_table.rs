@@ -60,7 +60,8 @@ pub fn load(path: &Path, value: &str, file: &str) -> Result<Vec<Entry>> {
         // The table's rule for method `m` on this row's other settings.
         let takes = |m| {
             let noise = s.noise != "off";
-            tabled(m, s.crop, s.window, s.prior, noise, s.reweight_rounds)
+            let (it, rounds) = (s.iterations, s.reweight_rounds);
+            tabled(m, it, s.crop, s.window, s.prior, noise, rounds)
         };
         plain_joint_rows |= s.method == Method::Joint && takes(Method::Gap);
         if !takes(s.method) {
