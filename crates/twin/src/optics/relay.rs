@@ -18,6 +18,8 @@ use specmux_core::error::Result;
 use specmux_core::error::UNNAMED_FILE;
 use std::sync::Arc;
 
+mod sliced;
+
 /// Most frequency bins the openings may pass over the band: the exact sum runs over their
 /// pairs (60 000 bins: 1.8·10⁹ pairs, about 10 s on two cores).
 pub const MAX_PASSED_BINS: usize = 60_000;
@@ -217,13 +219,26 @@ pub struct PairSums {
 }
 
 impl PairSums {
+    /// Zero sums over the box qx in 0..=qx_max, |qy| ≤ qy_max.
+    fn zeros((qx_max, qy_max): (i64, i64)) -> PairSums {
+        let n = ((qx_max + 1) * (2 * qy_max + 1)) as usize;
+        PairSums {
+            qx_max,
+            qy_max,
+            s: [vec![Complex64::default(); n], vec![Complex64::default(); n]],
+        }
+    }
+
+    /// The cell of (qx, qy), None outside the box.
+    fn index(&self, qx: i64, qy: i64) -> Option<usize> {
+        ((0..=self.qx_max).contains(&qx) && qy.abs() <= self.qy_max)
+            .then(|| (qx * (2 * self.qy_max + 1) + qy + self.qy_max) as usize)
+    }
+
     /// Both components at (qx, qy), zero outside the pairs' reach.
     pub fn at(&self, qx: i64, qy: i64) -> [Complex64; 2] {
-        if !(0..=self.qx_max).contains(&qx) || qy.abs() > self.qy_max {
-            return [Complex64::default(); 2];
-        }
-        let i = (qx * (2 * self.qy_max + 1) + qy + self.qy_max) as usize;
-        [self.s[0][i], self.s[1][i]]
+        self.index(qx, qy)
+            .map_or([Complex64::default(); 2], |i| [self.s[0][i], self.s[1][i]])
     }
 
     /// Largest |qx| and |qy| with a non-zero sum possible.
@@ -232,25 +247,44 @@ impl PairSums {
     }
 }
 
-/// The pair sums of `bins` (sorted by kx, as [`passed_bins`] returns them), parallel over
-/// columns of q so that every column has one writer.
-pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
+/// Largest |k_a − k_b| over the bins in x and y (bins sorted by kx); (0, 0) without bins.
+fn reach_of(bins: &[PassedBin]) -> (i64, i64) {
     let (kx0, kx1) = match (bins.first(), bins.last()) {
         (Some(a), Some(b)) => (a.kx, b.kx),
         _ => (0, 0),
     };
-    // No bins (the openings pass nothing): one zero cell.
     let ky = bins.first().map_or(0, |b| b.ky);
     let (ky0, ky1) = bins
         .iter()
         .fold((ky, ky), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
-    let (qx_max, qy_max) = (kx1 - kx0, ky1 - ky0);
+    (kx1 - kx0, ky1 - ky0)
+}
+
+/// The pair sums of `bins` (sorted by kx, as [`passed_bins`] returns them): by slices of
+/// wavelength where that is cheaper ([`sliced`]), pair by pair otherwise.
+pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
+    match sliced::Plan::new(bins) {
+        Some(plan) => plan.sums(bins),
+        None => direct_pair_sums(bins),
+    }
+}
+
+/// The pair sums of `bins` pair by pair: O(N²) in the number of bins.
+pub fn direct_pair_sums(bins: &[PassedBin]) -> PairSums {
+    let mut sums = PairSums::zeros(reach_of(bins));
+    add_pairs(bins, &mut sums);
+    sums
+}
+
+/// Adds the pairs of `bins` (sorted by kx, within the reach of `sums`) to `sums`, parallel over
+/// columns of q so that every column has one writer.
+fn add_pairs(bins: &[PassedBin], sums: &mut PairSums) {
+    let qy_max = sums.qy_max;
     let h = (2 * qy_max + 1) as usize;
-    let cols = (qx_max + 1) as usize;
+    let cols = (sums.qx_max + 1) as usize;
     let kxs: Vec<i64> = bins.iter().map(|b| b.kx).collect();
     let per_task = cols.div_ceil(64).max(1);
-    let mut s0 = vec![Complex64::default(); cols * h];
-    let mut s1 = vec![Complex64::default(); cols * h];
+    let [s0, s1] = &mut sums.s;
     s0.par_chunks_mut(per_task * h)
         .zip(s1.par_chunks_mut(per_task * h))
         .enumerate()
@@ -273,11 +307,6 @@ pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
                 }
             }
         });
-    PairSums {
-        qx_max,
-        qy_max,
-        s: [s0, s1],
-    }
 }
 
 /// The pair sums on some device: [`CpuPairSums`] and, behind the `gpu` feature,

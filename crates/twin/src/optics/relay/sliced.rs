@@ -1,0 +1,646 @@
+//! The pair sums by slices of wavelength, exact like the pair loop but O(K FFTs + E²/K) for E
+//! interval ends instead of O(N²). Within a slice the bins that pass all of it (F) and those with
+//! an end inside it (P) make
+//!   Σ_pairs = ΔW·(F ⋆ F) + F ⋆ (w·P) + (w·P) ⋆ F + (P × P pair by pair),
+//! with ΔW the slice's pair weights and w a P bin's own weight in it; the correlations are one
+//! FFT each on a lattice sheared so that the streaks of passed bins lie along an axis (their box
+//! is then mostly full, not mostly empty), accumulated in the transform domain over the slices.
+
+use super::add_pairs;
+use super::reach_of;
+use super::Interval;
+use super::PairSums;
+use super::PassedBin;
+use glam::I64Vec2;
+use rayon::prelude::*;
+use rustfft::num_complex::Complex64;
+use rustfft::Fft;
+use rustfft::FftPlanner;
+use std::sync::Arc;
+
+/// Fewest bins for which slicing is considered: below it the pair loop takes milliseconds.
+const MIN_BINS: usize = 2048;
+
+/// Cost of one FFT point per factor log₂(size), in pair-loop pairs (measured, docs/speed.md).
+const FFT_COST: f64 = 0.25;
+
+/// A unimodular map of the bin lattice, k ↦ (s·k − lo.x, t·k − lo.y), under which the bins fill
+/// the box [0, len.x) × [0, len.y); correlations on it are those of the bins, relabelled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Shear {
+    s: I64Vec2,
+    t: I64Vec2,
+    lo: I64Vec2,
+    len: I64Vec2,
+}
+
+impl Shear {
+    /// The shear with the smallest box over the bins, among rows t of entries up to 12 (the
+    /// streaks' directions) and rows s completing them to a unimodular map.
+    fn fit(bins: &[PassedBin]) -> Shear {
+        let edge = column_ends(bins);
+        let mut best: Option<Shear> = None;
+        for tx in 0..=12i64 {
+            for ty in -12..=12i64 {
+                if gcd(tx, ty) != 1 || (tx == 0 && ty != 1) {
+                    continue;
+                }
+                let t = I64Vec2::new(tx, ty);
+                let s0 = completion(t);
+                let m = -(s0.dot(t) as f64 / t.length_squared() as f64).round() as i64;
+                for s in [s0 + (m - 1) * t, s0 + m * t, s0 + (m + 1) * t] {
+                    let c = Shear::over(s, t, &edge);
+                    if best.is_none_or(|b| c.cells() < b.cells()) {
+                        best = Some(c);
+                    }
+                }
+            }
+        }
+        best.expect("t = (0, 1) is always a candidate")
+    }
+
+    /// The map with rows s, t, offset to the points' box.
+    fn over(s: I64Vec2, t: I64Vec2, points: &[I64Vec2]) -> Shear {
+        let (mut lo, mut hi) = (I64Vec2::MAX, I64Vec2::MIN);
+        for p in points {
+            let q = I64Vec2::new(s.dot(*p), t.dot(*p));
+            (lo, hi) = (lo.min(q), hi.max(q));
+        }
+        Shear {
+            s,
+            t,
+            lo,
+            len: hi - lo + I64Vec2::ONE,
+        }
+    }
+
+    fn cells(&self) -> i64 {
+        self.len.x * self.len.y
+    }
+
+    /// The bin's place in the box.
+    fn place(&self, b: &PassedBin) -> (usize, usize) {
+        let k = I64Vec2::new(b.kx, b.ky);
+        let q = I64Vec2::new(self.s.dot(k), self.t.dot(k)) - self.lo;
+        (q.x as usize, q.y as usize)
+    }
+
+    /// The lattice difference q whose image is (ds, dt): the inverse map (determinant ±1).
+    fn unshear(&self, ds: i64, dt: i64) -> (i64, i64) {
+        let det = self.s.x * self.t.y - self.s.y * self.t.x;
+        (
+            det * (self.t.y * ds - self.s.y * dt),
+            det * (self.s.x * dt - self.t.x * ds),
+        )
+    }
+}
+
+/// Greatest common divisor of |a| and |b|.
+fn gcd(a: i64, b: i64) -> i64 {
+    if b == 0 {
+        a.abs()
+    } else {
+        gcd(b, a % b)
+    }
+}
+
+/// A row s with s.x·t.y − s.y·t.x = 1 for coprime t (extended Euclid).
+fn completion(t: I64Vec2) -> I64Vec2 {
+    // x·a + y·b = g for (a, b) = (t.y, −t.x).
+    fn euclid(a: i64, b: i64) -> (i64, i64, i64) {
+        if b == 0 {
+            return (a, 1, 0);
+        }
+        let (g, x, y) = euclid(b, a.rem_euclid(b));
+        (g, y, x - a.div_euclid(b) * y)
+    }
+    let (g, x, y) = euclid(t.y, -t.x);
+    I64Vec2::new(x, y) * g.signum()
+}
+
+/// The lowest and highest bin of every column (bins sorted by (kx, ky)): the extremes of any
+/// linear function of k over the bins are among them.
+fn column_ends(bins: &[PassedBin]) -> Vec<I64Vec2> {
+    bins.chunk_by(|a, b| a.kx == b.kx)
+        .flat_map(|c| [&c[0], &c[c.len() - 1]])
+        .map(|b| I64Vec2::new(b.kx, b.ky))
+        .collect()
+}
+
+/// A boundary between slices: the wavelength and the cumulative pair weights through it.
+#[derive(Clone, Copy, Debug)]
+struct Cut {
+    at: f64,
+    c: [f64; 2],
+}
+
+/// How a bin meets one slice.
+enum Meets {
+    /// One of its intervals covers the slice.
+    Whole,
+    /// Its intervals clipped to the slice (an end lies inside), with their summed weights.
+    Part([Interval; 3], usize, [f64; 2]),
+    Not,
+}
+
+/// The slice (lo, hi] of the band between two cuts (the first one closed below: [lo, hi]).
+#[derive(Clone, Copy, Debug)]
+struct Slice {
+    lo: Cut,
+    hi: Cut,
+    first: bool,
+}
+
+impl Slice {
+    /// The slice's own pair weights (those of two bins passing all of it).
+    fn weight(&self) -> [f64; 2] {
+        [self.hi.c[0] - self.lo.c[0], self.hi.c[1] - self.lo.c[1]]
+    }
+
+    /// How bin `b` (disjoint intervals, as `passed_bins` makes them) meets the slice.
+    fn meets(&self, b: &PassedBin) -> Meets {
+        let mut part = [Interval::default(); 3];
+        let mut n = 0;
+        for iv in &b.ivs[..b.n] {
+            let misses = iv.lo > self.hi.at || (!self.first && iv.hi <= self.lo.at);
+            if misses {
+                continue;
+            }
+            let from_below = iv.lo <= self.lo.at;
+            if from_below && iv.hi >= self.hi.at {
+                return Meets::Whole;
+            }
+            part[n] = Interval {
+                lo: iv.lo.max(self.lo.at),
+                hi: iv.hi.min(self.hi.at),
+                c_lo: if from_below { self.lo.c } else { iv.c_lo },
+                c_hi: if iv.hi >= self.hi.at {
+                    self.hi.c
+                } else {
+                    iv.c_hi
+                },
+            };
+            n += 1;
+        }
+        if n == 0 {
+            return Meets::Not;
+        }
+        let w = part[..n].iter().fold([0.0; 2], |w, iv| {
+            [
+                w[0] + iv.c_hi[0] - iv.c_lo[0],
+                w[1] + iv.c_hi[1] - iv.c_lo[1],
+            ]
+        });
+        Meets::Part(part, n, w)
+    }
+
+    /// The bins that pass all of the slice, and those with an end inside it (clipped to it,
+    /// with their weights in it), in the order of `bins`.
+    fn split<'a>(&self, bins: &'a [PassedBin]) -> (Vec<&'a PassedBin>, Vec<(PassedBin, [f64; 2])>) {
+        let (mut whole, mut part) = (Vec::new(), Vec::new());
+        for b in bins {
+            match self.meets(b) {
+                Meets::Whole => whole.push(b),
+                Meets::Part(ivs, n, w) => part.push((
+                    PassedBin {
+                        ivs,
+                        n,
+                        ..b.clone()
+                    },
+                    w,
+                )),
+                Meets::Not => (),
+            }
+        }
+        (whole, part)
+    }
+}
+
+/// How to slice one set of bins: the shear, the FFT grid and the cuts.
+pub(super) struct Plan {
+    shear: Shear,
+    grid: (usize, usize),
+    slices: Vec<Slice>,
+}
+
+impl Plan {
+    /// The plan for `bins` (sorted by (kx, ky)), None when the pair loop is cheaper.
+    pub(super) fn new(bins: &[PassedBin]) -> Option<Plan> {
+        if bins.len() < MIN_BINS {
+            return None;
+        }
+        let (shear, grid) = layout(bins);
+        let (first, his, last) = ends(bins);
+        let interior = interior_ends(bins, first.at, last.at) as f64;
+        let points = (grid.0 * grid.1) as f64;
+        let per_slice = 3.0 * points * points.log2() * FFT_COST;
+        let cost = |k: usize| k as f64 * per_slice + interior * interior / (2.0 * k as f64);
+        let k = (1..=his.len() + 1).min_by(|&a, &b| cost(a).total_cmp(&cost(b)))?;
+        let pairs = (bins.len() * bins.len()) as f64 / 2.0;
+        (cost(k) <= pairs / 2.0).then(|| Plan {
+            shear,
+            grid,
+            slices: slices(first, &his, last, k),
+        })
+    }
+
+    /// The plan for `bins` with `k` slices (fewer where the upper ends are fewer), cheaper or not.
+    #[cfg(test)]
+    fn with_slices(bins: &[PassedBin], k: usize) -> Plan {
+        let (shear, grid) = layout(bins);
+        let (first, his, last) = ends(bins);
+        Plan {
+            shear,
+            grid,
+            slices: slices(first, &his, last, k.min(his.len() + 1)),
+        }
+    }
+
+    /// The pair sums of `bins`, the same cells as the pair loop's (to rounding).
+    pub(super) fn sums(&self, bins: &[PassedBin]) -> PairSums {
+        let ffts = Transforms::new(self.grid);
+        let zero = || (Spectra::zeros(self.grid), Vec::new());
+        let (spectra, parts) = (self.slices.par_iter())
+            .filter(|slice| slice.weight()[0] != 0.0)
+            .fold(zero, |(mut acc, mut parts), slice| {
+                let (whole, part) = slice.split(bins);
+                acc.add(&ffts, &self.shear, slice.weight(), &whole, &part);
+                parts.push(part.into_iter().map(|(b, _)| b).collect::<Vec<_>>());
+                (acc, parts)
+            })
+            .reduce(zero, |(a, mut pa), (b, pb)| {
+                pa.extend(pb);
+                (a.plus(b), pa)
+            });
+        let mut sums = PairSums::zeros(reach_of(bins));
+        spectra.add_to(&ffts, &self.shear, &mut sums);
+        for part in &parts {
+            add_pairs(part, &mut sums);
+        }
+        sums
+    }
+}
+
+/// The shear of the bins and the grid that holds their correlations without wrapping round.
+fn layout(bins: &[PassedBin]) -> (Shear, (usize, usize)) {
+    let shear = Shear::fit(bins);
+    let side = |len: i64| smooth(2 * len as usize - 1);
+    (shear, (side(shear.len.x), side(shear.len.y)))
+}
+
+/// Interval ends strictly inside the band [first, last].
+fn interior_ends(bins: &[PassedBin], first: f64, last: f64) -> usize {
+    bins.iter()
+        .flat_map(|b| &b.ivs[..b.n])
+        .map(|iv| usize::from(iv.lo > first) + usize::from(iv.hi < last))
+        .sum()
+}
+
+/// The band's lower end (with the weights below it), the interior upper ends (sorted, with the
+/// weights through them) and the upper end.
+fn ends(bins: &[PassedBin]) -> (Cut, Vec<Cut>, Cut) {
+    let ivs = || bins.iter().flat_map(|b| &b.ivs[..b.n]);
+    let first = ivs().min_by(|a, b| a.lo.total_cmp(&b.lo)).map(|iv| Cut {
+        at: iv.lo,
+        c: iv.c_lo,
+    });
+    let mut his: Vec<Cut> = ivs()
+        .map(|iv| Cut {
+            at: iv.hi,
+            c: iv.c_hi,
+        })
+        .collect();
+    his.sort_by(|a, b| a.at.total_cmp(&b.at));
+    let last = *his.last().expect("slicing is planned for some bins");
+    his.retain(|c| c.at < last.at);
+    (first.expect("some bins"), his, last)
+}
+
+/// `k` slices cut at quantiles of the interior upper ends.
+fn slices(first: Cut, his: &[Cut], last: Cut, k: usize) -> Vec<Slice> {
+    let mut cuts = vec![first];
+    for j in 1..k {
+        let c = his[j * his.len() / k];
+        if c.at > cuts[cuts.len() - 1].at {
+            cuts.push(c);
+        }
+    }
+    cuts.push(last);
+    cuts.windows(2)
+        .enumerate()
+        .map(|(i, w)| Slice {
+            lo: w[0],
+            hi: w[1],
+            first: i == 0,
+        })
+        .collect()
+}
+
+/// The smallest size ≥ n with no prime factor above 7 (fast for rustfft).
+fn smooth(n: usize) -> usize {
+    (n.max(1)..)
+        .find(|&m| {
+            let mut r = m;
+            for p in [2, 3, 5, 7] {
+                while r % p == 0 {
+                    r /= p;
+                }
+            }
+            r == 1
+        })
+        .expect("smooth numbers are unbounded")
+}
+
+/// Planned 2-D transforms of the sheared grid: rows s (gs of them), columns t (gt).
+struct Transforms {
+    gs: usize,
+    gt: usize,
+    t_fwd: Arc<dyn Fft<f64>>,
+    s_fwd: Arc<dyn Fft<f64>>,
+    t_inv: Arc<dyn Fft<f64>>,
+    s_inv: Arc<dyn Fft<f64>>,
+}
+
+impl Transforms {
+    fn new((gs, gt): (usize, usize)) -> Transforms {
+        let mut p = FftPlanner::new();
+        Transforms {
+            gs,
+            gt,
+            t_fwd: p.plan_fft_forward(gt),
+            s_fwd: p.plan_fft_forward(gs),
+            t_inv: p.plan_fft_inverse(gt),
+            s_inv: p.plan_fft_inverse(gs),
+        }
+    }
+
+    /// The transform of `values` placed on the grid's first `rows` rows, transposed: (xt, xs)
+    /// at xt·gs + xs. Only the filled rows are transformed along t.
+    fn forward(
+        &self,
+        rows: usize,
+        values: impl Iterator<Item = ((usize, usize), Complex64)>,
+    ) -> Vec<Complex64> {
+        let (gs, gt) = (self.gs, self.gt);
+        let mut grid = vec![Complex64::default(); gs * gt];
+        for ((s, t), v) in values {
+            grid[s * gt + t] = v;
+        }
+        let mut scratch = vec![
+            Complex64::default();
+            self.t_fwd
+                .get_inplace_scratch_len()
+                .max(self.s_fwd.get_inplace_scratch_len())
+        ];
+        for row in grid[..rows * gt].chunks_exact_mut(gt) {
+            self.t_fwd.process_with_scratch(row, &mut scratch);
+        }
+        let mut out = vec![Complex64::default(); gs * gt];
+        transpose::transpose(&grid, &mut out, gt, gs);
+        for row in out.chunks_exact_mut(gs) {
+            self.s_fwd.process_with_scratch(row, &mut scratch);
+        }
+        out
+    }
+
+    /// The inverse of [`Transforms::forward`] for a real spectrum, normalised: (ds, dt) at
+    /// ds·gt + dt, indices modulo the grid.
+    fn inverse(&self, spectrum: &[f64]) -> Vec<Complex64> {
+        let (gs, gt) = (self.gs, self.gt);
+        let norm = 1.0 / (gs * gt) as f64;
+        let mut x: Vec<Complex64> = spectrum
+            .iter()
+            .map(|&v| Complex64::new(v * norm, 0.0))
+            .collect();
+        x.par_chunks_mut(gs).for_each_init(
+            || vec![Complex64::default(); self.s_inv.get_inplace_scratch_len()],
+            |scratch, row| self.s_inv.process_with_scratch(row, scratch),
+        );
+        let mut out = vec![Complex64::default(); gs * gt];
+        transpose::transpose(&x, &mut out, gs, gt);
+        out.par_chunks_mut(gt).for_each_init(
+            || vec![Complex64::default(); self.t_inv.get_inplace_scratch_len()],
+            |scratch, row| self.t_inv.process_with_scratch(row, scratch),
+        );
+        out
+    }
+}
+
+/// The transform of Σ over slices of the correlations of their whole and part bins, per pair
+/// weight component (real: the sums are Hermitian in q).
+struct Spectra {
+    a: [Vec<f64>; 2],
+}
+
+impl Spectra {
+    fn zeros((gs, gt): (usize, usize)) -> Spectra {
+        Spectra {
+            a: [vec![0.0; gs * gt], vec![0.0; gs * gt]],
+        }
+    }
+
+    fn plus(mut self, other: Spectra) -> Spectra {
+        for (a, b) in self.a.iter_mut().zip(&other.a) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
+        self
+    }
+
+    /// Adds ΔW·|F̂|² + 2·Re(F̂·conj(Ĝ)) of one slice: F its whole bins, G its part bins times
+    /// their weights in it.
+    fn add(
+        &mut self,
+        ffts: &Transforms,
+        shear: &Shear,
+        dw: [f64; 2],
+        whole: &[&PassedBin],
+        part: &[(PassedBin, [f64; 2])],
+    ) {
+        if whole.is_empty() {
+            return;
+        }
+        let rows = shear.len.x as usize;
+        let f = ffts.forward(rows, whole.iter().map(|b| (shear.place(b), b.value)));
+        for (c, a) in self.a.iter_mut().enumerate() {
+            let g = (!part.is_empty()).then(|| {
+                ffts.forward(
+                    rows,
+                    part.iter().map(|(b, w)| (shear.place(b), b.value * w[c])),
+                )
+            });
+            for (i, (a, x)) in a.iter_mut().zip(&f).enumerate() {
+                let cross = g.as_ref().map_or(0.0, |g| (x * g[i].conj()).re);
+                *a += dw[c] * x.norm_sqr() + 2.0 * cross;
+            }
+        }
+    }
+
+    /// Adds the sums these spectra hold to `sums`, at the lattice's own q.
+    fn add_to(&self, ffts: &Transforms, shear: &Shear, sums: &mut PairSums) {
+        let (gs, gt) = (ffts.gs as i64, ffts.gt as i64);
+        for (c, a) in self.a.iter().enumerate() {
+            let x = ffts.inverse(a);
+            for ds in 1 - shear.len.x..shear.len.x {
+                for dt in 1 - shear.len.y..shear.len.y {
+                    let (qx, qy) = shear.unshear(ds, dt);
+                    if let Some(i) = sums.index(qx, qy) {
+                        sums.s[c][i] += x[(ds.rem_euclid(gs) * gt + dt.rem_euclid(gt)) as usize];
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::direct_pair_sums;
+    use super::*;
+    use rand::Rng;
+    use rand::SeedableRng;
+
+    /// Cumulative pair weights (weight, first moment about 550 nm) below and through λ: flat
+    /// light on 400–700 nm, or with `line` all of it at 550 nm (where below and through differ).
+    fn cumulative(line: bool) -> impl Fn(f64, bool) -> [f64; 2] {
+        move |l, through| {
+            if line {
+                let w = if l > 550.0 || (through && l == 550.0) {
+                    1.0
+                } else {
+                    0.0
+                };
+                [w, 0.0]
+            } else {
+                let l = l.clamp(400.0, 700.0);
+                [
+                    (l - 400.0) / 300.0,
+                    ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
+                ]
+            }
+        }
+    }
+
+    /// Random bins along a streak of direction `dir` (a band some bins wide, filled at random),
+    /// complex values, 1–3 disjoint intervals each with ends on a 5 nm grid (so ends of
+    /// different bins tie, 550 nm among them), sorted by (kx, ky) as `passed_bins` returns them.
+    fn streak_bins(seed: u64, dir: (i64, i64), line: bool) -> Vec<PassedBin> {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+        let c = cumulative(line);
+        let mut bins = Vec::new();
+        for along in -60..60i64 {
+            for across in -3..=3i64 {
+                if !rng.gen_bool(0.7) {
+                    continue;
+                }
+                let n = rng.gen_range(1..=3);
+                let mut ends: Vec<i64> = Vec::new();
+                while ends.len() < 2 * n {
+                    let e = rng.gen_range(76..=144) * 5;
+                    if !ends.contains(&e) {
+                        ends.push(e);
+                    }
+                }
+                ends.sort();
+                let mut ivs = [Interval::default(); 3];
+                for (iv, e) in ivs.iter_mut().zip(ends.chunks(2)) {
+                    let (lo, hi) = (e[0] as f64, e[1] as f64);
+                    *iv = Interval {
+                        lo,
+                        hi,
+                        c_lo: c(lo, false),
+                        c_hi: c(hi, true),
+                    };
+                }
+                bins.push(PassedBin {
+                    kx: along * dir.0 / 4 + across * dir.1.signum(),
+                    ky: along * dir.1 / 4 - across * dir.0.signum(),
+                    value: Complex64::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)),
+                    weight: 0.0,
+                    ivs,
+                    n,
+                });
+            }
+        }
+        bins.sort_by_key(|b| (b.kx, b.ky));
+        bins.dedup_by_key(|b| (b.kx, b.ky));
+        bins
+    }
+
+    /// Largest |a − b| over the cells relative to the largest |b|, per component.
+    fn error(a: &PairSums, b: &PairSums) -> [f64; 2] {
+        assert_eq!(a.reach(), b.reach());
+        [0, 1].map(|c| {
+            let scale = b.s[c].iter().fold(0.0f64, |m, v| m.max(v.norm()));
+            let diff = a.s[c]
+                .iter()
+                .zip(&b.s[c])
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).norm()));
+            if scale > 0.0 {
+                diff / scale
+            } else {
+                diff
+            }
+        })
+    }
+
+    #[test]
+    fn sliced_sums_are_the_pair_loops_for_any_slicing() {
+        for (seed, dir, line) in [
+            (1, (4, 0), false),
+            (2, (8, 4), false),
+            (3, (-4, 12), false),
+            (4, (8, 4), true),
+        ] {
+            let bins = streak_bins(seed, dir, line);
+            let direct = direct_pair_sums(&bins);
+            for k in [1, 2, 7, 40, 1000] {
+                let plan = Plan::with_slices(&bins, k);
+                let e = error(&plan.sums(&bins), &direct);
+                assert!(
+                    e[0] < 1e-12 && e[1] < 1e-12,
+                    "seed {seed}, {k} slices: {e:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_shear_lines_a_diagonal_streak_up_with_an_axis() {
+        let bins = streak_bins(5, (8, 4), false);
+        let shear = Shear::fit(&bins);
+        let (x0, x1) = (bins[0].kx, bins[bins.len() - 1].kx);
+        let (y0, y1) = bins
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
+        let boxed = (x1 - x0 + 1) * (y1 - y0 + 1);
+        assert!(
+            shear.cells() * 5 < boxed,
+            "{} of {boxed} cells",
+            shear.cells()
+        );
+        // Differences map back: unshear(place(a) − place(b)) = k_a − k_b.
+        for (a, b) in bins.iter().zip(bins.iter().rev()) {
+            let ((sa, ta), (sb, tb)) = (shear.place(a), shear.place(b));
+            let q = shear.unshear(sa as i64 - sb as i64, ta as i64 - tb as i64);
+            assert_eq!(q, (a.kx - b.kx, a.ky - b.ky));
+            assert!(sa < shear.len.x as usize && ta < shear.len.y as usize);
+        }
+    }
+
+    #[test]
+    fn completion_is_unimodular() {
+        for t in [(1, 0), (0, 1), (2, 1), (3, -7), (12, 5), (5, -12)] {
+            let t = I64Vec2::new(t.0, t.1);
+            let s = completion(t);
+            assert_eq!(s.x * t.y - s.y * t.x, 1, "{t:?}: {s:?}");
+        }
+    }
+
+    #[test]
+    fn smooth_sizes_have_no_prime_above_seven() {
+        assert_eq!(
+            [1, 11, 13, 97, 121, 2733].map(smooth),
+            [1, 12, 14, 98, 125, 2744]
+        );
+    }
+}
