@@ -18,7 +18,10 @@ use specmux_core::error::Result;
 use specmux_core::error::UNNAMED_FILE;
 use std::sync::Arc;
 
+mod shear;
 mod sliced;
+
+use shear::Shear;
 
 /// Most frequency bins the openings may pass over the band: the exact sum runs over their
 /// pairs (60 000 bins: 1.8·10⁹ pairs, about 10 s on two cores).
@@ -209,55 +212,46 @@ fn overlap(a: &PassedBin, b: &PassedBin) -> [f64; 2] {
     g
 }
 
-/// The pair sums Σ value_a·conj(value_b)·∫(pair weights) at q = k_a − k_b for qx ≥ 0 (the
-/// other half follows by Hermitian symmetry): component 0 with the weight, 1 with its first
-/// moment about the centroid.
+/// The pair sums Σ value_a·conj(value_b)·∫(pair weights) at q = k_a − k_b: component 0 with the
+/// weight, 1 with its first moment about the centroid; stored for half the differences (those
+/// with s·q ≥ 0 for the first row s of a lattice map: kx ≥ 0 unsheared), the rest following by
+/// Hermitian symmetry.
 pub struct PairSums {
-    qx_max: i64,
-    qy_max: i64,
+    map: Shear,
     s: [Vec<Complex64>; 2],
 }
 
 impl PairSums {
-    /// Zero sums over the box qx in 0..=qx_max, |qy| ≤ qy_max.
-    fn zeros((qx_max, qy_max): (i64, i64)) -> PairSums {
-        let n = ((qx_max + 1) * (2 * qy_max + 1)) as usize;
+    /// Zero sums over the map's box.
+    fn zeros(map: Shear) -> PairSums {
+        let n = map.cells() as usize;
         PairSums {
-            qx_max,
-            qy_max,
+            map,
             s: [vec![Complex64::default(); n], vec![Complex64::default(); n]],
         }
     }
 
-    /// The cell of (qx, qy), None outside the box.
-    fn index(&self, qx: i64, qy: i64) -> Option<usize> {
-        ((0..=self.qx_max).contains(&qx) && qy.abs() <= self.qy_max)
-            .then(|| (qx * (2 * self.qy_max + 1) + qy + self.qy_max) as usize)
-    }
-
     /// Both components at (qx, qy), zero outside the pairs' reach.
     pub fn at(&self, qx: i64, qy: i64) -> [Complex64; 2] {
-        self.index(qx, qy)
-            .map_or([Complex64::default(); 2], |i| [self.s[0][i], self.s[1][i]])
+        let value = |i: usize| [self.s[0][i], self.s[1][i]];
+        match (self.map.cell(qx, qy), self.map.cell(-qx, -qy)) {
+            (Some(i), _) => value(i),
+            (None, Some(i)) => value(i).map(|v| v.conj()),
+            (None, None) => [Complex64::default(); 2],
+        }
     }
 
-    /// Largest |qx| and |qy| with a non-zero sum possible.
-    pub fn reach(&self) -> (i64, i64) {
-        (self.qx_max, self.qy_max)
+    /// Every stored cell with some sum not zero, in parallel: (qx, qy), the sums, and whether −q
+    /// is a cell not stored (its sums are their conjugates).
+    pub fn half_plane(
+        &self,
+    ) -> impl ParallelIterator<Item = ((i64, i64), [Complex64; 2], bool)> + '_ {
+        (self.s[0].par_iter().zip(&self.s[1]).enumerate()).filter_map(|(i, (&a, &b))| {
+            let zero = a == Complex64::default() && b == Complex64::default();
+            let mirrored = i as i64 >= self.map.len.y;
+            (!zero).then(|| (self.map.point(i), [a, b], mirrored))
+        })
     }
-}
-
-/// Largest |k_a − k_b| over the bins in x and y (bins sorted by kx); (0, 0) without bins.
-fn reach_of(bins: &[PassedBin]) -> (i64, i64) {
-    let (kx0, kx1) = match (bins.first(), bins.last()) {
-        (Some(a), Some(b)) => (a.kx, b.kx),
-        _ => (0, 0),
-    };
-    let ky = bins.first().map_or(0, |b| b.ky);
-    let (ky0, ky1) = bins
-        .iter()
-        .fold((ky, ky), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
-    (kx1 - kx0, ky1 - ky0)
 }
 
 /// The pair sums of `bins` (sorted by kx, as [`passed_bins`] returns them): by slices of
@@ -271,37 +265,47 @@ pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
 
 /// The pair sums of `bins` pair by pair: O(N²) in the number of bins.
 pub fn direct_pair_sums(bins: &[PassedBin]) -> PairSums {
-    let mut sums = PairSums::zeros(reach_of(bins));
+    let (kx0, kx1) = match (bins.first(), bins.last()) {
+        (Some(a), Some(b)) => (a.kx, b.kx),
+        _ => (0, 0),
+    };
+    // No bins (the openings pass nothing): one zero cell.
+    let ky = bins.first().map_or(0, |b| b.ky);
+    let (ky0, ky1) = bins
+        .iter()
+        .fold((ky, ky), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
+    let mut sums = PairSums::zeros(Shear::half_box(kx1 - kx0, ky1 - ky0));
     add_pairs(bins, &mut sums);
     sums
 }
 
-/// Adds the pairs of `bins` (sorted by kx, within the reach of `sums`) to `sums`, parallel over
-/// columns of q so that every column has one writer.
+/// Adds the pairs of `bins` whose q falls in the box of `sums` to it, the bins sorted by the
+/// first coordinate of its map (kx for the half plane's box); parallel over rows of the box so
+/// that every row has one writer.
 fn add_pairs(bins: &[PassedBin], sums: &mut PairSums) {
-    let qy_max = sums.qy_max;
-    let h = (2 * qy_max + 1) as usize;
-    let cols = (sums.qx_max + 1) as usize;
-    let kxs: Vec<i64> = bins.iter().map(|b| b.kx).collect();
-    let per_task = cols.div_ceil(64).max(1);
+    let map = sums.map;
+    let h = map.len.y as usize;
+    let at: Vec<_> = bins.iter().map(|b| map.image(b.kx, b.ky)).collect();
+    let per_task = (map.len.x as usize).div_ceil(64).max(1);
     let [s0, s1] = &mut sums.s;
     s0.par_chunks_mut(per_task * h)
         .zip(s1.par_chunks_mut(per_task * h))
         .enumerate()
         .for_each(|(t, (c0, c1))| {
-            let q0 = (t * per_task) as i64;
-            let q1 = q0 + (c0.len() / h) as i64;
-            for a in bins {
-                // b with q0 ≤ kx_a − kx_b < q1.
-                let lo = kxs.partition_point(|&k| k <= a.kx - q1);
-                let hi = kxs.partition_point(|&k| k <= a.kx - q0);
-                for b in &bins[lo..hi] {
+            let d0 = map.lo.x + (t * per_task) as i64;
+            let d1 = d0 + (c0.len() / h) as i64;
+            for (a, pa) in bins.iter().zip(&at) {
+                // b with d0 ≤ s_a − s_b < d1.
+                let lo = at.partition_point(|p| p.x <= pa.x - d1);
+                let hi = at.partition_point(|p| p.x <= pa.x - d0);
+                for (b, pb) in bins[lo..hi].iter().zip(&at[lo..hi]) {
                     let g = overlap(a, b);
                     if g == [0.0; 2] {
                         continue;
                     }
                     let p = a.value * b.value.conj();
-                    let i = ((a.kx - b.kx - q0) * h as i64 + a.ky - b.ky + qy_max) as usize;
+                    let d = *pa - *pb - map.lo;
+                    let i = ((d.x - (d0 - map.lo.x)) * h as i64 + d.y) as usize;
                     c0[i] += p * g[0];
                     c1[i] += p * g[1];
                 }
@@ -375,8 +379,7 @@ impl PairSummer for GpuPairSummer {
                 .collect()
         };
         Ok(PairSums {
-            qx_max: g.qx_max,
-            qy_max: g.qy_max,
+            map: Shear::half_box(g.qx_max, g.qy_max),
             s: [component(0), component(1)],
         })
     }
@@ -395,16 +398,22 @@ pub fn pair_summer_for(device: &crate::device::OpenDevice) -> Arc<dyn PairSummer
     Arc::new(CpuPairSums)
 }
 
-/// Per component, the largest |GPU − CPU| over the cells relative to the CPU's largest |sum|
-/// (absolute where that is 0); the reaches must agree.
-#[cfg(all(test, feature = "gpu"))]
-pub(crate) fn gpu_error(cpu: &PairSums, gpu: &PairSums) -> [f64; 2] {
-    assert_eq!(cpu.reach(), gpu.reach());
-    let max = |s: &[Complex64]| s.iter().fold(0.0f64, |m, v| m.max(v.norm()));
-    [0, 1].map(|k| {
-        let diff: Vec<Complex64> = cpu.s[k].iter().zip(&gpu.s[k]).map(|(a, b)| a - b).collect();
-        let scale = max(&cpu.s[k]);
-        max(&diff) / if scale > 0.0 { scale } else { 1.0 }
+/// Per component, the largest |a − b| over the cells either holds relative to b's
+/// largest |sum| (absolute where that is 0): sums on different maps compared cell by cell.
+#[cfg(test)]
+pub(crate) fn relative_difference(a: &PairSums, b: &PairSums) -> [f64; 2] {
+    let worst = |x: &PairSums, y: &PairSums, c: usize| {
+        (x.half_plane())
+            .map(|((qx, qy), v, _)| (v[c] - y.at(qx, qy)[c]).norm())
+            .reduce(|| 0.0, f64::max)
+    };
+    [0, 1].map(|c| {
+        let scale = b
+            .half_plane()
+            .map(|(_, v, _)| v[c].norm())
+            .reduce(|| 0.0, f64::max);
+        let diff = worst(a, b, c).max(worst(b, a, c));
+        diff / if scale > 0.0 { scale } else { 1.0 }
     })
 }
 
@@ -442,7 +451,7 @@ mod tests {
     #[test]
     fn no_bins_give_one_zero_cell() {
         let s = pair_sums(&[]);
-        assert_eq!(s.reach(), (0, 0));
+        assert_eq!(s.s[0].len(), 1);
         assert_eq!(s.at(0, 0), [Complex64::default(); 2]);
     }
 
@@ -625,7 +634,7 @@ mod tests {
         let Some(gpu) = gpu() else { return };
         let bins = three_discs();
         let (cpu, g) = (pair_sums(&bins), gpu.pair_sums(&bins).unwrap());
-        let e = gpu_error(&cpu, &g);
+        let e = relative_difference(&g, &cpu);
         eprintln!(
             "three discs ({} bins): GPU against CPU {:.1e}, {:.1e}",
             bins.len(),
@@ -688,7 +697,7 @@ mod tests {
                     n,
                 });
             }
-            let e = gpu_error(&pair_sums(&bins), &gpu.pair_sums(&bins).unwrap());
+            let e = relative_difference(&gpu.pair_sums(&bins).unwrap(), &pair_sums(&bins));
             worst = [0, 1].map(|k| worst[k].max(e[k]));
         }
         eprintln!(
