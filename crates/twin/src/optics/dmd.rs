@@ -102,8 +102,12 @@ impl DmdConfig {
     /// per mirror, normalised to 1 at DC: the field (or intensity) is Σ b[n] · box(x − n), so its
     /// spectrum is the periodic B(f) times this envelope.
     pub fn mirror_envelope(&self, fx: f64, fy: f64) -> f64 {
-        let a = self.fill_factor.sqrt();
-        sinc(a * fx) * sinc(a * fy)
+        self.mirror_envelope_along(fx) * self.mirror_envelope_along(fy)
+    }
+
+    /// The envelope's factor along one axis (it is separable).
+    pub fn mirror_envelope_along(&self, f: f64) -> f64 {
+        sinc(self.fill_factor.sqrt() * f)
     }
 
     /// The binary pattern the DMD shows for a grey `target` (values in [0, 1], `width × height`).

@@ -708,11 +708,15 @@ impl ModulatorSpectrum {
     fn at(&self, kx: i64, ky: i64, split: f64) -> Complex64 {
         let v = self.coarse.at(kx, ky);
         let v = Complex64::new(v.re as f64, v.im as f64);
+        v * (self.along(kx, self.wc, split) * self.along(ky, self.hc, split))
+    }
+
+    /// The factor of bin k of n along one axis that multiplies the shown pattern's periodic
+    /// spectrum: the mirror envelope's with a DMD, the band limit's without.
+    fn along(&self, k: i64, n: usize, split: f64) -> f64 {
         match &self.dmd {
-            Some(d) => {
-                v * d.mirror_envelope(kx as f64 / self.wc as f64, ky as f64 / self.hc as f64)
-            }
-            None => v * nyquist(kx, self.wc, split) * nyquist(ky, self.hc, split),
+            Some(d) => d.mirror_envelope_along(k as f64 / n as f64),
+            None => nyquist(k, n, split),
         }
     }
 
@@ -828,17 +832,31 @@ pub fn relay_open(dmd: Option<&DmdConfig>, m: &DmdConfig, display: &Display) -> 
 }
 
 /// Coherent throughput: the passed share, over the light, of the field's energy at frequencies
-/// up to the openings' reach (at least the mirror grid's band).
+/// up to the openings' reach (at least the mirror grid's band). The source is the periodic
+/// spectrum times separable factors, so the window's energy is Σ over one period of |B|² times
+/// each axis's squared factors summed over the bins of that residue.
 fn coherent_throughput(bins: &[PassedBin], source: &ModulatorSpectrum, grid: &Grid) -> f64 {
     let (wc, hc) = grid.coarse();
-    let k = |n: usize| (grid.reach.max(0.5) * n as f64).floor() as i64;
-    let (kx, ky) = (k(wc), k(hc));
-    let all: f64 = (-kx..=kx)
+    let residues = |n: usize| {
+        let k = (grid.reach.max(0.5) * n as f64).floor() as i64;
+        let mut sums = vec![0.0; n];
+        for q in -k..=k {
+            sums[q.rem_euclid(n as i64) as usize] += source.along(q, n, 0.5).powi(2);
+        }
+        sums
+    };
+    let (rx, ry) = (residues(wc), residues(hc));
+    let energy = |bx: i64, by: i64| {
+        let v = source.coarse.at(bx, by);
+        Complex64::new(v.re as f64, v.im as f64).norm_sqr()
+    };
+    let all: f64 = (0..wc as i64)
         .into_par_iter()
-        .map(|qx| {
-            (-ky..=ky)
-                .map(|qy| source.source(qx, qy).norm_sqr())
-                .sum::<f64>()
+        .map(|bx| {
+            let row: f64 = (0..hc as i64)
+                .map(|by| energy(bx, by) * ry[by as usize])
+                .sum();
+            row * rx[bx as usize]
         })
         .sum();
     let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();
