@@ -21,24 +21,15 @@ impl Shear {
     /// streaks' directions) and rows s completing them to a unimodular map.
     pub(super) fn fit(bins: &[PassedBin]) -> Shear {
         let edge = column_ends(bins);
-        let mut best: Option<Shear> = None;
-        for tx in 0..=12i64 {
-            for ty in -12..=12i64 {
-                if gcd(tx, ty) != 1 || (tx == 0 && ty != 1) {
-                    continue;
-                }
-                let t = I64Vec2::new(tx, ty);
+        let rows = (0..=12i64).flat_map(|x| (-12..=12i64).map(move |y| I64Vec2::new(x, y)));
+        rows.filter(|t| gcd(t.x, t.y) == 1 && (t.x != 0 || t.y == 1))
+            .flat_map(|t| {
                 let s0 = completion(t);
                 let m = -(s0.dot(t) as f64 / t.length_squared() as f64).round() as i64;
-                for s in [s0 + (m - 1) * t, s0 + m * t, s0 + (m + 1) * t] {
-                    let c = Shear::over(s, t, &edge);
-                    if best.is_none_or(|b| c.cells() < b.cells()) {
-                        best = Some(c);
-                    }
-                }
-            }
-        }
-        best.expect("t = (0, 1) is always a candidate")
+                [m - 1, m, m + 1].map(|m| Shear::over(s0 + m * t, t, &edge))
+            })
+            .min_by_key(|c| c.cells())
+            .expect("t = (0, 1) is always a candidate")
     }
 
     /// The map with rows s, t, offset to the points' box.
