@@ -3,7 +3,6 @@
 //! ±1 that lines a streak up with an axis keeps every correlation (it relabels the lattice) and
 //! makes the box of the bins, and of their differences, nearly full.
 
-use super::PassedBin;
 use glam::I64Vec2;
 
 /// A unimodular map of the bin lattice, k ↦ (s·k − lo.x, t·k − lo.y), under which the bins fill
@@ -19,14 +18,15 @@ pub(super) struct Shear {
 impl Shear {
     /// The shear with the smallest box over the bins, among rows t of entries up to 12 (the
     /// streaks' directions) and rows s completing them to a unimodular map.
-    pub(super) fn fit(bins: &[PassedBin]) -> Shear {
-        let edge = column_ends(bins);
+    /// `points` need only hold the extremes of every linear function over the set (the lowest
+    /// and highest point of every column do).
+    pub(super) fn fit(points: &[I64Vec2]) -> Shear {
         let rows = (0..=12i64).flat_map(|x| (-12..=12i64).map(move |y| I64Vec2::new(x, y)));
         rows.filter(|t| gcd(t.x, t.y) == 1 && (t.x != 0 || t.y == 1))
             .flat_map(|t| {
                 let s0 = completion(t);
                 let m = -(s0.dot(t) as f64 / t.length_squared() as f64).round() as i64;
-                [m - 1, m, m + 1].map(|m| Shear::over(s0 + m * t, t, &edge))
+                [m - 1, m, m + 1].map(|m| Shear::over(s0 + m * t, t, points))
             })
             .min_by_key(|c| c.cells())
             .expect("t = (0, 1) is always a candidate")
@@ -77,9 +77,9 @@ impl Shear {
         I64Vec2::new(self.s.dot(k), self.t.dot(k))
     }
 
-    /// The bin's place in the box.
-    pub(super) fn place(&self, b: &PassedBin) -> (usize, usize) {
-        let q = self.image(b.kx, b.ky) - self.lo;
+    /// The place of lattice point k in the box.
+    pub(super) fn place(&self, kx: i64, ky: i64) -> (usize, usize) {
+        let q = self.image(kx, ky) - self.lo;
         (q.x as usize, q.y as usize)
     }
 
@@ -129,39 +129,39 @@ fn completion(t: I64Vec2) -> I64Vec2 {
     I64Vec2::new(x, y) * g.signum()
 }
 
-/// The lowest and highest bin of every column (bins sorted by (kx, ky)): the extremes of any
-/// linear function of k over the bins are among them.
-fn column_ends(bins: &[PassedBin]) -> Vec<I64Vec2> {
-    bins.chunk_by(|a, b| a.kx == b.kx)
-        .flat_map(|c| [&c[0], &c[c.len() - 1]])
-        .map(|b| I64Vec2::new(b.kx, b.ky))
-        .collect()
-}
-
 #[cfg(test)]
 mod tests {
-    use super::super::sliced::tests::streak_bins;
     use super::*;
+
+    /// Every lattice point of a band along direction (2, 1) through the origin: |x − 2y| ≤ 5.
+    fn band() -> Vec<I64Vec2> {
+        (-600..600i64)
+            .flat_map(|x| {
+                ((x - 5).div_euclid(2)..=(x + 5).div_euclid(2)).map(move |y| I64Vec2::new(x, y))
+            })
+            .filter(|p| (p.x - 2 * p.y).abs() <= 5)
+            .collect()
+    }
 
     #[test]
     fn the_shear_lines_a_diagonal_streak_up_with_an_axis() {
-        let bins = streak_bins(5, (8, 4), false);
-        let shear = Shear::fit(&bins);
-        let (x0, x1) = (bins[0].kx, bins[bins.len() - 1].kx);
-        let (y0, y1) = bins
-            .iter()
-            .fold((i64::MAX, i64::MIN), |(a, b), x| (a.min(x.ky), b.max(x.ky)));
-        let boxed = (x1 - x0 + 1) * (y1 - y0 + 1);
+        let points = band();
+        let shear = Shear::fit(&points);
+        let (lo, hi) = (points.iter()).fold((I64Vec2::MAX, I64Vec2::MIN), |(l, h), p| {
+            (l.min(*p), h.max(*p))
+        });
+        let boxed = (hi - lo + I64Vec2::ONE).element_product();
+        // 6 600 points in a box of 1 200 × 605 cells; sheared, at most two cells a point.
         assert!(
-            shear.cells() * 5 < boxed,
+            shear.cells() <= 2 * points.len() as i64,
             "{} of {boxed} cells",
             shear.cells()
         );
-        // Differences map back: unshear(place(a) − place(b)) = k_a − k_b.
-        for (a, b) in bins.iter().zip(bins.iter().rev()) {
-            let ((sa, ta), (sb, tb)) = (shear.place(a), shear.place(b));
+        // Differences map back: unshear(place(a) − place(b)) = a − b, and places fit the box.
+        for (a, b) in points.iter().zip(points.iter().rev()) {
+            let ((sa, ta), (sb, tb)) = (shear.place(a.x, a.y), shear.place(b.x, b.y));
             let q = shear.unshear(sa as i64 - sb as i64, ta as i64 - tb as i64);
-            assert_eq!(q, (a.kx - b.kx, a.ky - b.ky));
+            assert_eq!(q, (a.x - b.x, a.y - b.y));
             assert!(sa < shear.len.x as usize && ta < shear.len.y as usize);
         }
     }
@@ -177,13 +177,13 @@ mod tests {
 
     #[test]
     fn cells_and_points_are_inverse() {
-        let shear = Shear::fit(&streak_bins(6, (-4, 12), false)).half_differences();
+        let shear = Shear::fit(&band()).half_differences();
         for i in [0, 1, 17, shear.cells() as usize - 1] {
             let (qx, qy) = shear.point(i);
             assert_eq!(shear.cell(qx, qy), Some(i));
         }
-        let (qx, qy) = shear.point(0);
-        let past = shear.unshear(-1, 0);
-        assert_eq!(shear.cell(past.0, past.1), None, "{qx}, {qy}");
+        // The half with s·q < 0 is not stored.
+        let below = shear.unshear(-1, 0);
+        assert_eq!(shear.cell(below.0, below.1), None);
     }
 }

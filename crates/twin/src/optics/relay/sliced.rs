@@ -6,11 +6,12 @@
 //! FFT each on a lattice sheared so that the streaks of passed bins lie along an axis (their box
 //! is then mostly full, not mostly empty), accumulated in the transform domain over the slices.
 
-use super::add_pairs;
+use super::pairs::add_pairs;
+use super::pairs::Interval;
+use super::pairs::PairSums;
+use super::pairs::PassedBin;
 use super::shear::Shear;
-use super::Interval;
-use super::PairSums;
-use super::PassedBin;
+use glam::I64Vec2;
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 use rustfft::Fft;
@@ -143,7 +144,7 @@ impl Plan {
 
     /// The plan for `bins` with `k` slices (fewer where the upper ends are fewer), cheaper or not.
     #[cfg(test)]
-    fn with_slices(bins: &[PassedBin], k: usize) -> Plan {
+    pub(super) fn with_slices(bins: &[PassedBin], k: usize) -> Plan {
         let (shear, grid) = layout(bins);
         let (first, his, last) = ends(bins);
         Plan {
@@ -180,9 +181,18 @@ impl Plan {
 
 /// The shear of the bins and the grid that holds their correlations without wrapping round.
 fn layout(bins: &[PassedBin]) -> (Shear, (usize, usize)) {
-    let shear = Shear::fit(bins);
+    let shear = Shear::fit(&column_ends(bins));
     let side = |len: i64| smooth(2 * len as usize - 1);
     (shear, (side(shear.len.x), side(shear.len.y)))
+}
+
+/// The lowest and highest bin of every column (bins sorted by (kx, ky)): the extremes of any
+/// linear function of k over the bins are among them.
+fn column_ends(bins: &[PassedBin]) -> Vec<I64Vec2> {
+    bins.chunk_by(|a, b| a.kx == b.kx)
+        .flat_map(|c| [&c[0], &c[c.len() - 1]])
+        .map(|b| I64Vec2::new(b.kx, b.ky))
+        .collect()
 }
 
 /// Interval ends strictly inside the band [first, last].
@@ -357,12 +367,16 @@ impl Spectra {
             return;
         }
         let rows = shear.len.x as usize;
-        let f = ffts.forward(rows, whole.iter().map(|b| (shear.place(b), b.value)));
+        let f = ffts.forward(
+            rows,
+            whole.iter().map(|b| (shear.place(b.kx, b.ky), b.value)),
+        );
         for (c, a) in self.a.iter_mut().enumerate() {
             let g = (!part.is_empty()).then(|| {
                 ffts.forward(
                     rows,
-                    part.iter().map(|(b, w)| (shear.place(b), b.value * w[c])),
+                    part.iter()
+                        .map(|(b, w)| (shear.place(b.kx, b.ky), b.value * w[c])),
                 )
             });
             for (i, (a, x)) in a.iter_mut().zip(&f).enumerate() {
@@ -391,9 +405,9 @@ impl Spectra {
 }
 
 #[cfg(test)]
-pub(super) mod tests {
-    use super::super::direct_pair_sums;
-    use super::super::relative_difference;
+mod tests {
+    use super::super::pairs::direct_pair_sums;
+    use super::super::pairs::relative_difference;
     use super::*;
     use rand::Rng;
     use rand::SeedableRng;
@@ -422,7 +436,7 @@ pub(super) mod tests {
     /// Random bins along a streak of direction `dir` (a band some bins wide, filled at random),
     /// complex values, 1–3 disjoint intervals each with ends on a 5 nm grid (so ends of
     /// different bins tie, 550 nm among them), sorted by (kx, ky) as `passed_bins` returns them.
-    pub(crate) fn streak_bins(seed: u64, dir: (i64, i64), line: bool) -> Vec<PassedBin> {
+    fn streak_bins(seed: u64, dir: (i64, i64), line: bool) -> Vec<PassedBin> {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let c = cumulative(line);
         let mut bins = Vec::new();
@@ -484,32 +498,6 @@ pub(super) mod tests {
                 );
             }
         }
-    }
-
-    #[test]
-    fn a_streak_filters_bins_sum_as_in_the_pair_loop_and_large_sets_are_sliced() {
-        use crate::optics::fourier_filter::{FourierFilterConfig, Illumination};
-        use crate::optics::light::PatternLight;
-        use specmux_core::spectral::Curve;
-        let band = Curve::new("ramp", vec![400.0, 700.0], vec![1.0, 2.0]).unwrap();
-        let light = PatternLight::band(&band).unwrap();
-        let ap = FourierFilterConfig::default().aperture(13.68, 0.25, 0.125, &light);
-        let value = |kx: i64, ky: i64| {
-            let r = 1.0 / (1.0 + (kx * kx + ky * ky) as f64).sqrt();
-            Complex64::from_polar(r, 0.37 * kx as f64 - 0.11 * ky as f64)
-        };
-        let bins = |n| {
-            super::super::passed_bins(&ap, &light, Illumination::Coherent, (n, n), value).unwrap()
-        };
-        // The full rig's grid: slicing is chosen.
-        let large = bins(1536);
-        assert!(Plan::new(&large).is_some(), "{} bins", large.len());
-        let small = bins(1024);
-        let e = relative_difference(
-            &Plan::with_slices(&small, 12).sums(&small),
-            &direct_pair_sums(&small),
-        );
-        assert!(e[0] < 1e-12 && e[1] < 1e-12, "{e:?}");
     }
 
     #[test]
