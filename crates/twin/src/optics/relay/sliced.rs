@@ -25,6 +25,10 @@ const MIN_BINS: usize = 16_384;
 /// Cost of one FFT point per factor log₂(size), in pair-loop pairs (measured, docs/speed.md).
 const FFT_COST: f64 = 0.25;
 
+/// Largest FFT grid, in points (128 MB a complex grid, four in flight per thread): bins spread
+/// too widely for the shear to gather are summed pair by pair.
+const MAX_GRID_POINTS: usize = 1 << 23;
+
 /// A boundary between slices: the wavelength and the cumulative pair weights through it.
 #[derive(Clone, Copy, Debug)]
 struct Cut {
@@ -128,6 +132,9 @@ impl Plan {
             return None;
         }
         let (shear, grid) = layout(bins);
+        if grid.0 * grid.1 > MAX_GRID_POINTS {
+            return None;
+        }
         let (first, his, last) = ends(bins);
         let interior = interior_ends(bins, first.at, last.at) as f64;
         let points = (grid.0 * grid.1) as f64;
@@ -498,6 +505,25 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn bins_spread_over_a_wide_box_are_summed_pair_by_pair() {
+        // 20 000 bins at random over 3 000 × 3 000 cells: no shear gathers them, and their
+        // correlations would need a 6 000² grid.
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let template = streak_bins(8, (4, 0), false).swap_remove(0);
+        let mut bins: Vec<PassedBin> = (0..20_000)
+            .map(|_| PassedBin {
+                kx: rng.gen_range(0..3000),
+                ky: rng.gen_range(0..3000),
+                ..template.clone()
+            })
+            .collect();
+        bins.sort_by_key(|b| (b.kx, b.ky));
+        bins.dedup_by_key(|b| (b.kx, b.ky));
+        assert!(bins.len() > MIN_BINS);
+        assert!(Plan::new(&bins).is_none());
     }
 
     #[test]
