@@ -508,6 +508,26 @@ mod tests {
     }
 
     #[test]
+    fn bins_that_all_pass_the_whole_band_are_one_slice_of_ffts() {
+        // No interval end inside the band: one slice, every bin whole, no pair summed by pairs.
+        let c = cumulative(false);
+        let mut bins = streak_bins(9, (8, 4), false);
+        for b in &mut bins {
+            b.n = 1;
+            b.ivs[0] = Interval {
+                lo: 400.0,
+                hi: 700.0,
+                c_lo: c(400.0, false),
+                c_hi: c(700.0, true),
+            };
+        }
+        let plan = Plan::with_slices(&bins, 5);
+        assert_eq!(plan.slices.len(), 1);
+        let e = relative_difference(&plan.sums(&bins), &direct_pair_sums(&bins));
+        assert!(e[0] < 1e-12 && e[1] < 1e-12, "{e:?}");
+    }
+
+    #[test]
     fn bins_spread_over_a_wide_box_are_summed_pair_by_pair() {
         // 20 000 bins at random over 3 000 × 3 000 cells: no shear gathers them, and their
         // correlations would need a 6 000² grid.
