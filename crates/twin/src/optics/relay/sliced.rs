@@ -40,9 +40,16 @@ struct Cut {
 enum Meets {
     /// One of its intervals covers the slice.
     Whole,
-    /// Its intervals clipped to the slice (an end lies inside), with their summed weights.
-    Part([Interval; 3], usize, [f64; 2]),
+    /// An end lies inside the slice.
+    Part(Clipped),
     Not,
+}
+
+/// A bin with an interval end inside a slice: its intervals clipped to the slice, and its pair
+/// weights there (those it has with a bin that passes all of the slice).
+struct Clipped {
+    bin: PassedBin,
+    w: [f64; 2],
 }
 
 /// The slice (lo, hi] of the band between two cuts (the first one closed below: [lo, hi]).
@@ -93,24 +100,24 @@ impl Slice {
                 w[1] + iv.c_hi[1] - iv.c_lo[1],
             ]
         });
-        Meets::Part(part, n, w)
+        Meets::Part(Clipped {
+            bin: PassedBin {
+                ivs: part,
+                n,
+                ..b.clone()
+            },
+            w,
+        })
     }
 
-    /// The bins that pass all of the slice, and those with an end inside it (clipped to it,
-    /// with their weights in it), in the order of `bins`.
-    fn split<'a>(&self, bins: &'a [PassedBin]) -> (Vec<&'a PassedBin>, Vec<(PassedBin, [f64; 2])>) {
+    /// The bins that pass all of the slice, and those with an end inside it, in the order of
+    /// `bins`.
+    fn split<'a>(&self, bins: &'a [PassedBin]) -> (Vec<&'a PassedBin>, Vec<Clipped>) {
         let (mut whole, mut part) = (Vec::new(), Vec::new());
         for b in bins {
             match self.meets(b) {
                 Meets::Whole => whole.push(b),
-                Meets::Part(ivs, n, w) => part.push((
-                    PassedBin {
-                        ivs,
-                        n,
-                        ..b.clone()
-                    },
-                    w,
-                )),
+                Meets::Part(c) => part.push(c),
                 Meets::Not => (),
             }
         }
@@ -170,7 +177,7 @@ impl Plan {
             .fold(zero, |(mut acc, mut parts), slice| {
                 let (whole, part) = slice.split(bins);
                 acc.add(&ffts, &self.shear, slice.weight(), &whole, &part);
-                parts.push(part.into_iter().map(|(b, _)| b).collect::<Vec<_>>());
+                parts.push(part.into_iter().map(|c| c.bin).collect::<Vec<_>>());
                 (acc, parts)
             })
             .reduce(zero, |(a, mut pa), (b, pb)| {
@@ -368,7 +375,7 @@ impl Spectra {
         shear: &Shear,
         dw: [f64; 2],
         whole: &[&PassedBin],
-        part: &[(PassedBin, [f64; 2])],
+        part: &[Clipped],
     ) {
         if whole.is_empty() {
             return;
@@ -383,7 +390,7 @@ impl Spectra {
                 ffts.forward(
                     rows,
                     part.iter()
-                        .map(|(b, w)| (shear.place(b.kx, b.ky), b.value * w[c])),
+                        .map(|p| (shear.place(p.bin.kx, p.bin.ky), p.bin.value * p.w[c])),
                 )
             });
             for (i, (a, x)) in a.iter_mut().zip(&f).enumerate() {
