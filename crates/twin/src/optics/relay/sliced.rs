@@ -36,15 +36,6 @@ struct Cut {
     c: [f64; 2],
 }
 
-/// How a bin meets one slice.
-enum Meets {
-    /// One of its intervals covers the slice.
-    Whole,
-    /// An end lies inside the slice.
-    Part(Clipped),
-    Not,
-}
-
 /// A bin with an interval end inside a slice: its intervals clipped to the slice, and its pair
 /// weights there (those it has with a bin that passes all of the slice).
 struct Clipped {
@@ -66,43 +57,38 @@ impl Slice {
         [self.hi.c[0] - self.lo.c[0], self.hi.c[1] - self.lo.c[1]]
     }
 
-    /// How bin `b` (disjoint intervals, as `passed_bins` makes them) meets the slice.
-    fn meets(&self, b: &PassedBin) -> Meets {
-        let mut part = [Interval::default(); 3];
+    /// Whether one of the bin's intervals covers the slice.
+    fn covered_by(&self, b: &PassedBin) -> bool {
+        (b.ivs[..b.n].iter()).any(|iv| iv.lo <= self.lo.at && iv.hi >= self.hi.at)
+    }
+
+    /// For a bin no interval of which covers the slice: its intervals clipped to the slice and
+    /// its weights there, None when none meets it.
+    fn clip(&self, b: &PassedBin) -> Option<Clipped> {
+        let mut ivs = [Interval::default(); 3];
         let mut n = 0;
         for iv in &b.ivs[..b.n] {
-            let misses = iv.lo > self.hi.at || (!self.first && iv.hi <= self.lo.at);
-            if misses {
+            if iv.lo > self.hi.at || (!self.first && iv.hi <= self.lo.at) {
                 continue;
             }
-            let from_below = iv.lo <= self.lo.at;
-            if from_below && iv.hi >= self.hi.at {
-                return Meets::Whole;
-            }
-            part[n] = Interval {
+            let (from_below, past) = (iv.lo <= self.lo.at, iv.hi >= self.hi.at);
+            ivs[n] = Interval {
                 lo: iv.lo.max(self.lo.at),
                 hi: iv.hi.min(self.hi.at),
                 c_lo: if from_below { self.lo.c } else { iv.c_lo },
-                c_hi: if iv.hi >= self.hi.at {
-                    self.hi.c
-                } else {
-                    iv.c_hi
-                },
+                c_hi: if past { self.hi.c } else { iv.c_hi },
             };
             n += 1;
         }
-        if n == 0 {
-            return Meets::Not;
-        }
-        let w = part[..n].iter().fold([0.0; 2], |w, iv| {
+        let w = ivs[..n].iter().fold([0.0; 2], |w, iv| {
             [
                 w[0] + iv.c_hi[0] - iv.c_lo[0],
                 w[1] + iv.c_hi[1] - iv.c_lo[1],
             ]
         });
-        Meets::Part(Clipped {
+        (n > 0).then(|| Clipped {
             bin: PassedBin {
-                ivs: part,
+                ivs,
                 n,
                 ..b.clone()
             },
@@ -110,15 +96,15 @@ impl Slice {
         })
     }
 
-    /// The bins that pass all of the slice, and those with an end inside it, in the order of
-    /// `bins`.
+    /// The bins that pass all of the slice, and those with an end inside it (bins with
+    /// disjoint intervals, as `passed_bins` makes them), in the order of `bins`.
     fn split<'a>(&self, bins: &'a [PassedBin]) -> (Vec<&'a PassedBin>, Vec<Clipped>) {
         let (mut whole, mut part) = (Vec::new(), Vec::new());
         for b in bins {
-            match self.meets(b) {
-                Meets::Whole => whole.push(b),
-                Meets::Part(c) => part.push(c),
-                Meets::Not => (),
+            if self.covered_by(b) {
+                whole.push(b);
+            } else if let Some(c) = self.clip(b) {
+                part.push(c);
             }
         }
         (whole, part)
