@@ -6,7 +6,8 @@
 //! wavelength's OTF normalised by its pupil area, which scales as 1/λ²). The integral over the
 //! overlap of two intervals is a difference of the light's cumulative weight at their ends, so
 //! each pair costs a few operations. A second sum with the weight's first moment about the
-//! centroid carries the wavelength dependence of the lens OTF to first order.
+//! centroid carries the wavelength dependence of the lens OTF to first order. Large sets of bins
+//! are summed by slices of wavelength (`relay/sliced.rs`): the same sums, mostly by FFT.
 
 use crate::optics::fourier_filter::Aperture;
 use crate::optics::fourier_filter::Illumination;
@@ -30,7 +31,7 @@ pub use pairs::PairSums;
 pub use pairs::PassedBin;
 
 /// Most frequency bins the openings may pass over the band: the pair loop over 60 000 bins
-/// would visit 1.8·10⁹ pairs (about 10 s on two cores); the sums by slices ([`sliced`]) take a
+/// would visit 1.8·10⁹ pairs (about 10 s on two cores); the sums by slices (`relay/sliced.rs`) take a
 /// fraction of that where the bins lie along streaks, not everywhere.
 pub const MAX_PASSED_BINS: usize = 60_000;
 
@@ -171,7 +172,7 @@ fn too_many(aperture: &Aperture, n: usize) -> Error {
 }
 
 /// The pair sums of `bins` (sorted by kx, as [`passed_bins`] returns them): by slices of
-/// wavelength where that is cheaper ([`sliced`]), pair by pair otherwise.
+/// wavelength where that is cheaper (`relay/sliced.rs`), pair by pair otherwise.
 pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
     match sliced::Plan::new(bins) {
         Some(plan) => plan.sums(bins),
