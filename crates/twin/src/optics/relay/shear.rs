@@ -67,6 +67,7 @@ impl Shear {
         }
     }
 
+    /// The number of cells in the box.
     pub(super) fn cells(&self) -> i64 {
         self.len.x * self.len.y
     }
