@@ -90,8 +90,9 @@ impl PairSums {
     ) -> impl ParallelIterator<Item = ((i64, i64), [Complex64; 2], bool)> + '_ {
         (self.s[0].par_iter().zip(&self.s[1]).enumerate()).filter_map(|(i, (&a, &b))| {
             let zero = a == Complex64::default() && b == Complex64::default();
-            let mirrored = i as i64 >= self.map.len.y;
-            (!zero).then(|| (self.map.point(i), [a, b], mirrored))
+            let c = self.map.image_of_cell(i);
+            // s·q > 0: −q has s·q < 0, the half not stored.
+            (!zero).then(|| (self.map.unshear(c.x, c.y), [a, b], c.x > 0))
         })
     }
 }

@@ -91,10 +91,9 @@ impl Shear {
             .then(|| (c.x * self.len.y + c.y) as usize)
     }
 
-    /// The lattice point of row-major cell i.
-    pub(super) fn point(&self, i: usize) -> (i64, i64) {
-        let c = I64Vec2::new(i as i64 / self.len.y, i as i64 % self.len.y) + self.lo;
-        self.unshear(c.x, c.y)
+    /// The image (s·k, t·k) of the lattice point in row-major cell i.
+    pub(super) fn image_of_cell(&self, i: usize) -> I64Vec2 {
+        I64Vec2::new(i as i64 / self.len.y, i as i64 % self.len.y) + self.lo
     }
 
     /// The lattice point whose image is (ds, dt): the inverse map (determinant ±1).
@@ -180,7 +179,8 @@ mod tests {
     fn cells_and_points_are_inverse() {
         let shear = Shear::fit(&band()).half_differences();
         for i in [0, 1, 17, shear.cells() as usize - 1] {
-            let (qx, qy) = shear.point(i);
+            let c = shear.image_of_cell(i);
+            let (qx, qy) = shear.unshear(c.x, c.y);
             assert_eq!(shear.cell(qx, qy), Some(i));
         }
         // The half with s·q < 0 is not stored.

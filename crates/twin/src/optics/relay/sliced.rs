@@ -394,9 +394,8 @@ impl Spectra {
             let x = ffts.inverse(a);
             (0..map.cells() as usize)
                 .map(|i| {
-                    let ds = map.lo.x + i as i64 / map.len.y;
-                    let dt = map.lo.y + i as i64 % map.len.y;
-                    x[(ds.rem_euclid(gs) * gt + dt.rem_euclid(gt)) as usize]
+                    let d = map.image_of_cell(i);
+                    x[(d.x.rem_euclid(gs) * gt + d.y.rem_euclid(gt)) as usize]
                 })
                 .collect()
         });
