@@ -144,86 +144,83 @@ pub const TABLE: &[Entry] = &[
 ];
 
 /// The GPU's rows: `specmux bench dead-leaves --device gpu --repeats 3` on an NVIDIA H200
-/// (2026-11-26, second run of the day, Vulkan; docs/gpu.md): median seconds of the whole
-/// reconstruction of a 768² frame with the cube read back to the host, the same PSNRs as the
-/// CPU's. On a hardware GPU the bench adds the joint method at 160, 320 and 640 iterations: the
-/// cube stops improving at 23.33 dB, and the 160-iteration median is slower than 320's (its
-/// three runs 0.41, 0.29, 0.36 s) — kept as measured. The plug-and-play row is left out: it has
-/// no GPU kernel and runs on the CPU. Its joint rows predate the joint defaults of 2026-11-28
-/// (plain TV, the curvature prior): their times stand (one reweighting per run, no other
-/// cost), their PSNRs are the old defaults'; no GPU has been lent since to measure again.
+/// (2026-11-28, Vulkan; docs/gpu.md): median seconds of the whole reconstruction of a 768² frame
+/// with the cube read back to the host, the same PSNRs as the CPU's, the joint method at its
+/// defaults (the trained spectral prior, one reweighting). On a hardware GPU the bench adds the
+/// joint method at 160, 320 and 640 iterations: the cube still gains 0.2 dB from 160 to 640. The
+/// plug-and-play row is left out: it has no GPU kernel and runs on the CPU.
 pub const GPU_TABLE: &[Entry] = &[
     Entry {
         method: Method::Fourier,
         iterations: 0,
-        seconds: 0.0222,
+        seconds: 0.0176,
         psnr_db: 13.96,
     },
     Entry {
         method: Method::Gap,
         iterations: 50,
-        seconds: 0.0341,
+        seconds: 0.0316,
         psnr_db: 17.28,
     },
     Entry {
         method: Method::GapTv,
         iterations: 50,
-        seconds: 0.0437,
+        seconds: 0.0428,
         psnr_db: 21.35,
     },
     Entry {
         method: Method::Joint,
         iterations: 10,
-        seconds: 0.024,
-        psnr_db: 20.45,
+        seconds: 0.0234,
+        psnr_db: 20.40,
     },
     Entry {
         method: Method::Joint,
         iterations: 15,
-        seconds: 0.0257,
-        psnr_db: 21.49,
+        seconds: 0.0275,
+        psnr_db: 22.17,
     },
     Entry {
         method: Method::Joint,
         iterations: 20,
-        seconds: 0.0288,
-        psnr_db: 22.18,
+        seconds: 0.0313,
+        psnr_db: 23.23,
     },
     Entry {
         method: Method::Joint,
         iterations: 30,
-        seconds: 0.0345,
-        psnr_db: 22.72,
+        seconds: 0.0373,
+        psnr_db: 24.00,
     },
     Entry {
         method: Method::Joint,
         iterations: 40,
-        seconds: 0.0409,
-        psnr_db: 22.96,
+        seconds: 0.0446,
+        psnr_db: 24.62,
     },
     Entry {
         method: Method::Joint,
         iterations: 80,
-        seconds: 0.0665,
-        psnr_db: 23.28,
+        seconds: 0.0649,
+        psnr_db: 25.56,
     },
     Entry {
         method: Method::Joint,
         iterations: 160,
-        seconds: 0.3562,
-        psnr_db: 23.33,
+        seconds: 0.1051,
+        psnr_db: 26.09,
     },
     Entry {
         method: Method::Joint,
         iterations: 320,
-        seconds: 0.2175,
-        psnr_db: 23.33,
+        seconds: 0.1789,
+        psnr_db: 26.27,
     },
     Entry {
         method: Method::Joint,
         iterations: 640,
-        seconds: 0.3745,
-        psnr_db: 23.33,
+        seconds: 0.3191,
+        psnr_db: 26.30,
     },
 ];
 
@@ -534,23 +531,22 @@ mod tests {
     }
 
     /// On the GPU's table the default budget holds every measured setting: the best one, the
-    /// joint method's 80 iterations, measured (never extrapolated beyond it); a budget of 30 ms
-    /// falls between the 20 and 40 iteration rows.
+    /// joint method's 640 iterations, measured (never extrapolated beyond it); a budget of 30 ms
+    /// falls between the 15 and 20 iteration rows.
     #[test]
     fn the_gpu_table_picks_the_best_measured_joint_count() {
         let c = pick_from(GPU, default_budget(REFERENCE_PIXELS), REFERENCE_PIXELS).unwrap();
-        // 160, 320 and 640 it share the best PSNR (23.33 dB): the fastest of them, 320, wins.
         assert_eq!(
             (c.method, c.iterations, c.interpolated_from),
-            (Method::Joint, 320, None)
+            (Method::Joint, 640, None)
         );
         assert!(c.reason.contains("an NVIDIA H200 GPU"), "{}", c.reason);
         assert_eq!(c.measured_on, GPU.device);
-        // 20 + ⌊(0.030 − 0.0288)/(0.0345 − 0.0288) · 10⌋ = 22 iterations.
+        // 15 + ⌊(0.030 − 0.0275)/(0.0313 − 0.0275) · 5⌋ = 18 iterations.
         let c = pick_from(GPU, 0.030, REFERENCE_PIXELS).unwrap();
         assert_eq!(
             (c.method, c.iterations, c.interpolated_from),
-            (Method::Joint, 22, Some([20, 30]))
+            (Method::Joint, 18, Some([15, 20]))
         );
         assert_eq!(
             pick_from(CPU, 1.0, REFERENCE_PIXELS).unwrap().measured_on,
