@@ -11,6 +11,7 @@ use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_summer_for;
+use crate::optics::relay::SLICED_FROM_BINS;
 use crate::pattern_cache::PatternCache;
 use crate::rig::Rig;
 use crate::scene;
@@ -528,12 +529,22 @@ impl Stage for RelayStage {
     fn describe(&self) -> String {
         match &self.filter {
             Some(f) => format!(
-                "{}; pair sums on the {}",
+                "{}; {}",
                 imaging::describe_filter(f, self.chain.modulator()),
-                self.chain.pair_device().to_uppercase()
+                describe_pair_device(self.chain.pair_device())
             ),
             None => "no Fourier filter: the modulator's whole band-limited spectrum".into(),
         }
+    }
+}
+
+/// Where the relay's pair sums run: the GPU's summer hands large relays to the CPU's slices.
+fn describe_pair_device(device: &str) -> String {
+    match device {
+        "gpu" => format!(
+            "pair sums on the GPU below {SLICED_FROM_BINS} passed bins, by slices on the CPU above"
+        ),
+        _ => format!("pair sums on the {}", device.to_uppercase()),
     }
 }
 
@@ -767,7 +778,8 @@ pub(crate) mod gpu_tests {
         Some((p.run().unwrap().0.frame, p.explain()))
     }
 
-    /// `[compute] device = "gpu"` sums the relay's pairs on the GPU (the stage says so) and
+    /// `[compute] device = "gpu"` sums the relay's pairs on the GPU (the stage says so: this rig's
+    /// relays pass fewer bins than slicing starts at) and
     /// gives the CPU's frame within 1e-5 NRMSE: the pair sums' bound, which the lens and the
     /// resampling (linear, norm ≤ 1 per pattern) do not amplify. DMD 64 × 48, line light: the
     /// wheel's bands pass 7–19 thousand bins a pattern, whose sums took lavapipe 12 minutes

@@ -29,6 +29,7 @@ pub(crate) use pairs::relative_difference;
 use pairs::Interval;
 pub use pairs::PairSums;
 pub use pairs::PassedBin;
+pub use sliced::SLICED_FROM_BINS;
 
 /// Most frequency bins the openings may pass over the band: the pair loop over 60 000 bins
 /// would visit 1.8·10⁹ pairs (about 10 s on two cores); the sums by slices (`relay/sliced.rs`) take a
@@ -201,8 +202,10 @@ impl PairSummer for CpuPairSums {
     }
 }
 
-/// specmux-gpu's pair-sum kernel: per call one upload of the bins, one kernel, one read-back,
-/// in f32 within 1e-5 of the largest |sum| of each component (docs/gpu.md).
+/// specmux-gpu's pair-sum kernel where [`pair_sums`] would run the pair loop (below
+/// [`SLICED_FROM_BINS`]): per call one upload of the bins, one kernel, one read-back, in f32
+/// within 1e-5 of the largest |sum| of each component; above it the CPU's sums by slices, which
+/// on an H200 beat the kernel 2–22× a relay (docs/gpu.md).
 #[cfg(feature = "gpu")]
 pub struct GpuPairSummer {
     ctx: specmux_gpu::GpuContext,
@@ -224,6 +227,10 @@ impl GpuPairSummer {
 impl PairSummer for GpuPairSummer {
     fn pair_sums(&self, bins: &[PassedBin]) -> Result<PairSums> {
         use specmux_gpu::pair_sums::{PairBin, PassInterval};
+        // Where slicing pays, the sliced sums on the CPU beat the kernel (docs/gpu.md).
+        if let Some(plan) = sliced::Plan::new(bins) {
+            return Ok(plan.sums(bins));
+        }
         let interval = |iv: &Interval| PassInterval {
             lo: iv.lo,
             hi: iv.hi,
@@ -536,6 +543,41 @@ mod tests {
         assert!((g.at(20, 0)[0].re / dc - 2.0 / 3.0).abs() < 1e-5);
         assert!((g.at(40, 0)[0].re / dc - 1.0 / 3.0).abs() < 1e-5);
         assert_eq!(g.at(30, 0)[0], Complex64::default());
+    }
+
+    /// Bins past [`SLICED_FROM_BINS`] along a streak go to the CPU's slices: the GPU's summer
+    /// gives the sliced f64 sums (within 1e-12), not the f32 kernel's (about 1e-7 off).
+    #[cfg(feature = "gpu")]
+    #[test]
+    fn the_gpu_summer_hands_a_large_relay_to_the_slices() {
+        let Some(gpu) = gpu() else { return };
+        // A band 6 000 × 3 bins, each passing 450–650 nm of flat light on 400–700 nm.
+        let c = |l: f64| {
+            [
+                (l - 400.0) / 300.0,
+                ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
+            ]
+        };
+        let iv = Interval {
+            lo: 450.0,
+            hi: 650.0,
+            c_lo: c(450.0),
+            c_hi: c(650.0),
+        };
+        let bins: Vec<PassedBin> = (0..6000i64)
+            .flat_map(|kx| (0..3i64).map(move |ky| (kx, ky)))
+            .map(|(kx, ky)| PassedBin {
+                kx,
+                ky,
+                value: Complex64::new((kx % 7) as f64 - 3.0, (ky - 1) as f64 + 0.5),
+                weight: 0.0,
+                ivs: [iv, Interval::default(), Interval::default()],
+                n: 1,
+            })
+            .collect();
+        assert!(bins.len() > SLICED_FROM_BINS && sliced::Plan::new(&bins).is_some());
+        let e = relative_difference(&gpu.pair_sums(&bins).unwrap(), &pair_sums(&bins));
+        assert!(e[0] < 1e-12 && e[1] < 1e-12, "{e:?}");
     }
 
     /// Random bins (a sparse random set of a box, so columns hold several runs; 1–3 intervals

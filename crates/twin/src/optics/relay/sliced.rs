@@ -20,7 +20,7 @@ use std::sync::Arc;
 
 /// Fewest bins for which slicing is considered: below it the pair loop (1.3·10⁸ pairs) takes
 /// about 0.2 s on two cores, and the small rigs of the tests keep its bits.
-const MIN_BINS: usize = 16_384;
+pub const SLICED_FROM_BINS: usize = 16_384;
 
 /// Cost of one FFT point per factor log₂(size), in pair-loop pairs (measured, docs/speed.md).
 const FFT_COST: f64 = 0.25;
@@ -121,7 +121,7 @@ pub(super) struct Plan {
 impl Plan {
     /// The plan for `bins` (sorted by (kx, ky)), None when the pair loop is cheaper.
     pub(super) fn new(bins: &[PassedBin]) -> Option<Plan> {
-        if bins.len() < MIN_BINS {
+        if bins.len() < SLICED_FROM_BINS {
             return None;
         }
         let (shear, grid) = layout(bins);
@@ -534,7 +534,7 @@ mod tests {
             .collect();
         bins.sort_by_key(|b| (b.kx, b.ky));
         bins.dedup_by_key(|b| (b.kx, b.ky));
-        assert!(bins.len() > MIN_BINS);
+        assert!(bins.len() > SLICED_FROM_BINS);
         assert!(Plan::new(&bins).is_none());
     }
 
