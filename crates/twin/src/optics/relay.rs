@@ -545,6 +545,15 @@ mod tests {
         assert_eq!(g.at(30, 0)[0], Complex64::default());
     }
 
+    /// Cumulative (weight, first moment about 550 nm) of flat light on 400–700 nm through `l`.
+    #[cfg(feature = "gpu")]
+    fn flat_light_through(l: f64) -> [f64; 2] {
+        [
+            (l - 400.0) / 300.0,
+            ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
+        ]
+    }
+
     /// Bins past [`SLICED_FROM_BINS`] along a streak go to the CPU's slices: the GPU's summer
     /// gives the sliced f64 sums (within 1e-12), not the f32 kernel's (about 1e-7 off).
     #[cfg(feature = "gpu")]
@@ -552,12 +561,7 @@ mod tests {
     fn the_gpu_summer_hands_a_large_relay_to_the_slices() {
         let Some(gpu) = gpu() else { return };
         // A band 6 000 × 3 bins, each passing 450–650 nm of flat light on 400–700 nm.
-        let c = |l: f64| {
-            [
-                (l - 400.0) / 300.0,
-                ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
-            ]
-        };
+        let c = flat_light_through;
         let iv = Interval {
             lo: 450.0,
             hi: 650.0,
@@ -588,13 +592,7 @@ mod tests {
     fn gpu_pair_sums_match_the_cpu_on_random_bins() {
         use rand::{Rng, SeedableRng};
         let Some(gpu) = gpu() else { return };
-        // Cumulative (weight, first moment about 550 nm) of flat light on 400–700 nm.
-        let c = |l: f64| {
-            [
-                (l - 400.0) / 300.0,
-                ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
-            ]
-        };
+        let c = flat_light_through;
         let mut worst = [0.0f64; 2];
         for seed in 0..12u64 {
             let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
