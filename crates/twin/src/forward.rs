@@ -11,7 +11,6 @@ use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_summer_for;
-use crate::optics::relay::SLICED_FROM_BINS;
 use crate::pattern_cache::PatternCache;
 use crate::rig::Rig;
 use crate::scene;
@@ -531,20 +530,10 @@ impl Stage for RelayStage {
             Some(f) => format!(
                 "{}; {}",
                 imaging::describe_filter(f, self.chain.modulator()),
-                describe_pair_device(self.chain.pair_device())
+                self.chain.describe_pairs()
             ),
             None => "no Fourier filter: the modulator's whole band-limited spectrum".into(),
         }
-    }
-}
-
-/// Where the relay's pair sums run: the GPU's summer hands large relays to the CPU's slices.
-fn describe_pair_device(device: &str) -> String {
-    match device {
-        "gpu" => format!(
-            "pair sums on the GPU below {SLICED_FROM_BINS} passed bins, by slices on the CPU above"
-        ),
-        _ => format!("pair sums on the {}", device.to_uppercase()),
     }
 }
 

@@ -299,9 +299,9 @@ impl Chain {
         Chain { pairs, ..self }
     }
 
-    /// "cpu" or "gpu": where the relay's pair sums run.
-    pub fn pair_device(&self) -> &'static str {
-        self.pairs.device()
+    /// Where the relay's pair sums run, in words.
+    pub fn describe_pairs(&self) -> String {
+        self.pairs.describe()
     }
 
     pub fn config(&self) -> &OpticsConfig {
@@ -331,7 +331,7 @@ impl Chain {
             self.lights,
             self.width,
             self.height,
-            self.pair_device()
+            self.pairs.device()
         )
     }
 

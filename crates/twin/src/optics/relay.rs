@@ -181,31 +181,50 @@ pub fn pair_sums(bins: &[PassedBin]) -> PairSums {
     }
 }
 
-/// The pair sums on some device: [`CpuPairSums`] and, behind the `gpu` feature,
-/// [`GpuPairSummer`]; `[compute] device` picks one ([`pair_summer_for`]).
+/// The pair loop on some device: [`CpuPairSums`] and, behind the `gpu` feature,
+/// [`GpuPairSummer`]; `[compute] device` picks one ([`pair_summer_for`]). Whatever the device,
+/// bins that slicing takes are summed by slices on the CPU: on an H200 machine those sums beat
+/// the GPU's pair loop 2–22× a relay (docs/gpu.md).
 pub trait PairSummer: Send + Sync {
-    /// [`pair_sums`] of `bins` (sorted by (kx, ky), as [`passed_bins`] returns them).
-    fn pair_sums(&self, bins: &[PassedBin]) -> Result<PairSums>;
+    /// [`direct_pair_sums`] of `bins` (sorted by (kx, ky), as [`passed_bins`] returns them) on
+    /// this device.
+    fn pair_loop(&self, bins: &[PassedBin]) -> Result<PairSums>;
     /// "cpu" or "gpu".
     fn device(&self) -> &'static str;
+
+    /// [`pair_sums`] of `bins` with the pair loop on this device.
+    fn pair_sums(&self, bins: &[PassedBin]) -> Result<PairSums> {
+        match sliced::Plan::new(bins) {
+            Some(plan) => Ok(plan.sums(bins)),
+            None => self.pair_loop(bins),
+        }
+    }
+    /// Where the sums run, as the relay stage describes it.
+    fn describe(&self) -> String {
+        format!(
+            "pair sums on the {} below {SLICED_FROM_BINS} passed bins, by slices on the CPU above",
+            self.device().to_uppercase()
+        )
+    }
 }
 
-/// [`pair_sums`] on the CPU, in f64.
+/// The pair loop on the CPU, in f64.
 pub struct CpuPairSums;
 
 impl PairSummer for CpuPairSums {
-    fn pair_sums(&self, bins: &[PassedBin]) -> Result<PairSums> {
-        Ok(pair_sums(bins))
+    fn pair_loop(&self, bins: &[PassedBin]) -> Result<PairSums> {
+        Ok(direct_pair_sums(bins))
     }
     fn device(&self) -> &'static str {
         "cpu"
     }
+    fn describe(&self) -> String {
+        "pair sums on the CPU".into()
+    }
 }
 
-/// specmux-gpu's pair-sum kernel where [`pair_sums`] would run the pair loop (below
-/// [`SLICED_FROM_BINS`]): per call one upload of the bins, one kernel, one read-back, in f32
-/// within 1e-5 of the largest |sum| of each component; above it the CPU's sums by slices, which
-/// on an H200 beat the kernel 2–22× a relay (docs/gpu.md).
+/// specmux-gpu's pair-sum kernel as the pair loop: per call one upload of the bins, one kernel,
+/// one read-back, in f32 within 1e-5 of the largest |sum| of each component (docs/gpu.md).
 #[cfg(feature = "gpu")]
 pub struct GpuPairSummer {
     ctx: specmux_gpu::GpuContext,
@@ -225,12 +244,8 @@ impl GpuPairSummer {
 
 #[cfg(feature = "gpu")]
 impl PairSummer for GpuPairSummer {
-    fn pair_sums(&self, bins: &[PassedBin]) -> Result<PairSums> {
+    fn pair_loop(&self, bins: &[PassedBin]) -> Result<PairSums> {
         use specmux_gpu::pair_sums::{PairBin, PassInterval};
-        // Where slicing pays, the sliced sums on the CPU beat the kernel (docs/gpu.md).
-        if let Some(plan) = sliced::Plan::new(bins) {
-            return Ok(plan.sums(bins));
-        }
         let interval = |iv: &Interval| PassInterval {
             lo: iv.lo,
             hi: iv.hi,
