@@ -2,7 +2,8 @@
 //! Fourier mask passes, S(q) = Σ value_a·conj(value_b)·∫(pair weights over the wavelengths both
 //! pass) at q = k_a − k_b, qx ≥ 0 — the twin's `optics::relay::pair_sums`, one invocation per
 //! cell, in f32 with the error bounded as docs/gpu.md states. One upload, one kernel (dispatched
-//! once per chunk of 64 columns), one read-back per call; it takes plain bins, not the twin's.
+//! once per chunk of 64 columns and window of 256 rows), one read-back per call; it takes plain
+//! bins, not the twin's.
 
 use crate::context::{linear_groups, GpuContext};
 use crate::error::{GpuError, Result};
@@ -65,10 +66,15 @@ struct Params {
     qy_max: u32,
     ncells: u32,
     ca0: u32,
+    ka0: i32,
+    _pad: [u32; 3],
 }
 
 /// Columns kx_a per dispatch (`CHUNK` in shaders/pair_sums.wgsl).
 const CHUNK: usize = 64;
+
+/// Rows ky_a per dispatch (`ROWS` in shaders/pair_sums.wgsl).
+const ROWS: i64 = 256;
 
 /// The pair-sum kernel, compiled once; buffers are made per call (the bin count varies).
 pub struct GpuPairSums {
@@ -112,9 +118,11 @@ impl GpuPairSums {
             qy_max: qy_max as u32,
             ncells: ncells as u32,
             ca0: 0,
+            ka0: 0,
+            _pad: [0; 3],
         };
         let mut enc = ctx.device.create_command_encoder(&Default::default());
-        self.record(ctx, &mut enc, inputs, shape);
+        self.record(ctx, &mut enc, inputs, shape, &windows(bins, kx0));
         enc.copy_buffer_to_buffer(&sums, 0, &staging, 0, sums.size());
         ctx.queue.submit([enc.finish()]);
         let mut out = vec![[0.0f32; 4]; 2 * ncells];
@@ -126,21 +134,18 @@ impl GpuPairSums {
         })
     }
 
-    /// One dispatch per chunk of CHUNK columns over every cell, each with its own `ca0`.
+    /// One dispatch over every cell per window (`ca0`, `ka0`) of [`windows`].
     fn record(
         &self,
         ctx: &GpuContext,
         enc: &mut wgpu::CommandEncoder,
         inputs: [&wgpu::Buffer; 4],
         shape: Params,
+        windows: &[(u32, i32)],
     ) {
-        let binds: Vec<wgpu::BindGroup> = (0..shape.ncols as usize)
-            .step_by(CHUNK)
-            .map(|ca0| {
-                let params = Params {
-                    ca0: ca0 as u32,
-                    ..shape
-                };
+        let binds: Vec<wgpu::BindGroup> = (windows.iter())
+            .map(|&(ca0, ka0)| {
+                let params = Params { ca0, ka0, ..shape };
                 let u = ctx.uniform("pair params", &params);
                 let [b, r, c, s] = inputs;
                 ctx.bind(&self.pipeline, &[b, r, c, s, &u])
@@ -154,6 +159,26 @@ impl GpuPairSums {
             cp.dispatch_workgroups(x, y, z);
         }
     }
+}
+
+/// The dispatches' windows (first column − kx0, first row ky_a): each chunk of CHUNK columns
+/// cut into windows of ROWS rows over the rows its bins span, so that no invocation runs over
+/// more than CHUNK columns and ROWS rows of bins a.
+fn windows(bins: &[PairBin], kx0: i64) -> Vec<(u32, i32)> {
+    let mut spans: Vec<(u32, i64, i64)> = Vec::new();
+    for b in bins {
+        let ca0 = ((b.kx - kx0) as usize / CHUNK * CHUNK) as u32;
+        match spans.last_mut() {
+            Some((c, lo, hi)) if *c == ca0 => (*lo, *hi) = ((*lo).min(b.ky), (*hi).max(b.ky)),
+            _ => spans.push((ca0, b.ky, b.ky)),
+        }
+    }
+    let rows = |&(ca0, lo, hi): &(u32, i64, i64)| {
+        (lo..=hi)
+            .step_by(ROWS as usize)
+            .map(move |ka0| (ca0, ka0 as i32))
+    };
+    spans.iter().flat_map(rows).collect()
 }
 
 /// (kx0, qx_max, qy_max) of non-empty `bins`, or None for none; `Unsupported` when the sums

@@ -4,12 +4,13 @@
 //
 // The bins are sorted by (kx, ky) and cut into runs of consecutive ky in one column; for a cell
 // the pairs are the overlaps of a run of column kx_a with a run of column kx_a − qx shifted by
-// qy, so no pair is visited that cannot contribute. Interval ends are ranks of the host's f64
+// qy, found by merging the two columns' runs, so no pair is visited that cannot contribute. Interval ends are ranks of the host's f64
 // values (the same comparisons as the CPU); cumulative weights come as f32 (hi, lo) splits so
 // that their difference keeps f32 precision relative to itself. Each column's pairs are summed
-// plainly, the columns with Kahan compensation. A dispatch covers one chunk of columns kx_a
-// (lavapipe ends long loops early, so no invocation runs over all of them): the running sum
-// and its compensation stay in `sums` between the chunks' dispatches.
+// plainly, the columns with Kahan compensation. A dispatch covers one chunk of columns kx_a and
+// one window of rows ky_a (lavapipe ends long loops early, so no invocation runs over all
+// columns, nor along a whole long run): the running sum and its compensation stay in `sums`
+// between the dispatches.
 
 struct Interval {
     lo: u32,
@@ -34,9 +35,15 @@ struct Params {
     ncells: u32,
     // First column kx_a − kx0 of this dispatch's chunk; it ends at ca0 + CHUNK.
     ca0: u32,
+    // First row ky_a of this dispatch's window; it ends at ka0 + ROWS.
+    ka0: i32,
+    _pad0: u32,
+    _pad1: u32,
+    _pad2: u32,
 }
 
 const CHUNK: u32 = 64u;
+const ROWS: i32 = 256;
 
 @group(0) @binding(0) var<storage, read> bins: array<Bin>;
 // Per run: (first ky, length, index of its first bin, unused).
@@ -74,11 +81,12 @@ fn overlap(a: u32, b: u32) -> vec2<f32> {
     return g;
 }
 
-// Σ over the pairs of run ra (column kx_a) and run rb (column kx_a − qx) at this qy.
+// Σ over the pairs of run ra (column kx_a) and run rb (column kx_a − qx) at this qy, with ky_a
+// in this dispatch's window.
 fn run_pairs(ra: vec4<i32>, rb: vec4<i32>, qy: i32) -> vec4<f32> {
     var acc = vec4<f32>(0.0);
-    let lo = max(ra.x, rb.x + qy);
-    let hi = min(ra.x + ra.y, rb.x + rb.y + qy);
+    let lo = max(max(ra.x, rb.x + qy), pp.ka0);
+    let hi = min(min(ra.x + ra.y, rb.x + rb.y + qy), pp.ka0 + ROWS);
     for (var ky = lo; ky < hi; ky++) {
         let a = u32(ra.z + ky - ra.x);
         let b = u32(rb.z + ky - qy - rb.x);
@@ -94,6 +102,47 @@ fn run_pairs(ra: vec4<i32>, rb: vec4<i32>, qy: i32) -> vec4<f32> {
     return acc;
 }
 
+// The first run in runs[r0..r1) (sorted, disjoint) that ends, shifted by `shift`, after row y.
+fn first_ending_after(r0: u32, r1: u32, shift: i32, y: i32) -> u32 {
+    var lo = r0;
+    var hi = r1;
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        let r = runs[mid];
+        if r.x + r.y + shift > y {
+            hi = mid;
+        } else {
+            lo = mid + 1u;
+        }
+    }
+    return lo;
+}
+
+// Σ over the pairs of column ca and column cb shifted by qy, with ky_a in this dispatch's
+// window: the two sorted run lists are merged, so only runs that meet are paired (a column of
+// many short runs would otherwise pair every run with every other).
+fn column_pairs(ca: u32, cb: u32, qy: i32) -> vec4<f32> {
+    var part = vec4<f32>(0.0);
+    let end = pp.ka0 + ROWS;
+    var i = first_ending_after(cols[ca], cols[ca + 1u], 0, pp.ka0);
+    var j = first_ending_after(cols[cb], cols[cb + 1u], qy, pp.ka0);
+    while i < cols[ca + 1u] && j < cols[cb + 1u] {
+        let ra = runs[i];
+        let rb = runs[j];
+        if ra.x >= end || rb.x + qy >= end {
+            break;
+        }
+        part += run_pairs(ra, rb, qy);
+        // The run that ends first meets nothing further on.
+        if ra.x + ra.y <= rb.x + rb.y + qy {
+            i++;
+        } else {
+            j++;
+        }
+    }
+    return part;
+}
+
 @compute @workgroup_size(64)
 fn pair_sums(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
     let cell = gid.x + gid.y * nwg.x * 64u;
@@ -107,12 +156,7 @@ fn pair_sums(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     var comp = sums[2u * cell + 1u];
     for (var ca = max(qx, pp.ca0); ca < min(pp.ncols, pp.ca0 + CHUNK); ca++) {
         let cb = ca - qx;
-        var part = vec4<f32>(0.0);
-        for (var i = cols[ca]; i < cols[ca + 1u]; i++) {
-            for (var j = cols[cb]; j < cols[cb + 1u]; j++) {
-                part += run_pairs(runs[i], runs[j], qy);
-            }
-        }
+        let part = column_pairs(ca, cb, qy);
         // Kahan: comp carries what the last addition lost.
         let y = part - comp;
         let t = sum + y;
