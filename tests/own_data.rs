@@ -501,7 +501,8 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
 }
 
 /// A frame recorded with almost no light is reconstructed with a warning that its signal is
-/// under its noise, in the text and in reconstruct.json.
+/// under its noise and one that its calibration captures hold no carrier, in the text and in
+/// reconstruct.json.
 #[test]
 fn reconstruct_warns_of_a_frame_under_its_noise() {
     let scratch = tmpdir("own-dim");
@@ -523,12 +524,13 @@ fn reconstruct_warns_of_a_frame_under_its_noise() {
         ],
     );
     assert!(
-        text.contains("warning: the frame's mean signal is"),
+        text.contains("warning: the frame's mean signal is")
+            && text.contains("warning: calibration: carriers that do not stand out"),
         "{text}"
     );
     let report = read_json(&d.join("out/reconstruct.json"));
     assert!(report["mean_snr"].as_f64().unwrap() < 1.0, "{report}");
-    assert_eq!(report["warnings"].as_array().unwrap().len(), 1, "{report}");
+    assert_eq!(report["warnings"].as_array().unwrap().len(), 2, "{report}");
 }
 
 #[test]

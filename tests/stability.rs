@@ -180,7 +180,23 @@ fn light_a_few_electrons() {
         let case = format!("light: {e} e⁻ at full scale");
         let rep = run_toml(&format!("{SENSOR}electrons_at_full_scale = {e}\n")).unwrap();
         finite(&case, &rep);
+        // At 1 e⁻ (read noise 3.16 e⁻) the captures hold no carrier: the calibration says so.
+        let weak = rep.warnings.iter().any(|w| w.contains("do not stand out"));
+        assert_eq!(weak, e == "1", "{case}: {:?}", rep.warnings);
     }
+}
+
+/// A lens whose NA cuts every carrier (cut-off 2·NA/λ ≈ 0.0004 cycles/µm against the carriers'
+/// ≥ 0.007 on 13.68 µm mirrors): the patterns reach the camera as their mean alone, and the
+/// calibration names each carrier that does not stand out of its capture.
+#[test]
+fn optics_a_lens_that_cuts_the_carriers() {
+    let case = "optics: lens NA 1e-4 (no carrier reaches the camera)";
+    let rep = run_toml("[rig.lens]\nna = 1e-4\n[rig.sensor]\n").unwrap();
+    finite(case, &rep);
+    let weak = rep.warnings.iter().find(|w| w.contains("do not stand out"));
+    let named = |k: usize| weak.is_some_and(|w| w.contains(&format!("pattern {k} at")));
+    assert!((0..6).all(named), "{:?}", rep.warnings);
 }
 
 #[test]

@@ -222,12 +222,18 @@ pub struct Rehearsed {
     pub events: Vec<crate::log::Event>,
     pub virtual_s: f64,
     pub wall_s: f64,
+    /// What the acquired calibration warns of (carriers that do not stand out of their captures).
+    pub warning: Option<String>,
 }
 
 impl Rehearsed {
-    /// The per-frame table and the outcome, as `rehearse` prints them after the plan.
+    /// The per-frame table, the calibration's warning and the outcome, as `rehearse` prints
+    /// them after the plan.
     pub fn text(&self) -> String {
-        frame_table(&self.rows) + &outcome_text(&self.outcome, Some(self.virtual_s), self.wall_s)
+        let warning = (self.warning.iter()).map(|w| format!("warning: {w}\n"));
+        frame_table(&self.rows)
+            + &warning.collect::<String>()
+            + &outcome_text(&self.outcome, Some(self.virtual_s), self.wall_s)
     }
 }
 
@@ -272,6 +278,7 @@ pub fn rehearsal(
         events,
         virtual_s: sim.now_s(),
         wall_s: wall.elapsed().as_secs_f64(),
+        warning: sink.recon.as_ref().and_then(|r| r.calibration.warning()),
     })
 }
 

@@ -232,6 +232,9 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
         dir.join("calibration.ome.tif").display()
     );
     text += &frame_table(&rows);
+    if let Some(w) = cal.warning() {
+        text += &format!("warning: {w}\n");
+    }
     for note in files.commit()? {
         text += &format!("{note}\n");
     }

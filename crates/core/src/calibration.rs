@@ -63,7 +63,17 @@ pub struct MeasuredCarrier {
     pub white_level: f64,
     /// Shift from the design carrier, in cycles/px.
     pub shift: [f64; 2],
+    /// How far the carrier's peak stands above the capture's spectrum around it (its magnitude
+    /// over their median; [`PROMINENT`] and more for a carrier, about 3 for noise alone; at most
+    /// 10¹⁵, which noiseless captures reach); None where the frame is too small to have bins
+    /// around it.
+    pub prominence: Option<f64>,
 }
+
+/// The least prominence of a carrier found: the largest of the ~80 noise bins a search sees
+/// stands about 2.5 times their median (Rayleigh magnitudes), and one beyond 5 times has a
+/// chance of about 2·10⁻⁶; the rigs' carriers stand 260–3 000 times (docs/stability.md).
+pub const PROMINENT: f64 = 5.0;
 
 impl MeasuredCarrier {
     pub fn amplitude(&self) -> Complex64 {
@@ -121,6 +131,23 @@ pub struct Calibration {
 const SEARCH_BINS: i64 = 2;
 
 impl Calibration {
+    /// A warning naming the carriers that do not stand out of their captures' spectra, whose
+    /// channels would be demultiplexed from noise; None when every carrier does.
+    pub fn warning(&self) -> Option<String> {
+        let weak = |(k, m): (usize, &MeasuredCarrier)| {
+            let p = m.prominence.filter(|&p| p < PROMINENT)?;
+            let (fx, fy) = (m.carrier.fx, m.carrier.fy);
+            Some(format!(
+                "pattern {k} at ({fx:.4}, {fy:.4}) cycles/px {p:.1}×"
+            ))
+        };
+        let weak: Vec<String> = self.carriers.iter().enumerate().filter_map(weak).collect();
+        (!weak.is_empty()).then(|| format!(
+            "calibration: carriers that do not stand out of their captures: {} the median of the bins around them (noise alone reaches about 3×, a carrier {PROMINENT}× and more); those channels are demultiplexed from noise: check that the patterns reach the camera (lens NA, Fourier filter) and the light level",
+            weak.join(", ")
+        ))
+    }
+
     /// Estimate every carrier from the captures. `design` gives where to look: the strongest
     /// bin within `radius_bins` of each design carrier (never the DC bin), then sub-bin refined.
     pub fn from_frames(
@@ -237,7 +264,37 @@ fn measure_carrier(
         amplitude: [a.re, a.im],
         white_level,
         shift: [fx - design.fx, fy - design.fy],
+        prominence: prominence(&spec, best.0, best.1, best.2),
     })
+}
+
+/// How far the peak at (kx, ky) of magnitude `peak` stands above the spectrum around it: peak
+/// over the median magnitude of the bins 3 to 6 bins from it (Chebyshev distance; the DC bin
+/// and bins within 2 of the peak, wrapped, left out), at most 10¹⁵ (a median of zero: noiseless
+/// captures), so that it stays a finite number in the reports. None where fewer than 16 such
+/// bins exist.
+fn prominence(spec: &HalfSpectrum, kx: i64, ky: i64, peak: f32) -> Option<f64> {
+    let (w, h) = (spec.w as i64, spec.h as i64);
+    let near = |x: i64, y: i64, cx: i64, cy: i64| {
+        let d = |a: i64, b: i64, n: i64| (a - b).rem_euclid(n).min((b - a).rem_euclid(n));
+        d(x, cx, w).max(d(y, cy, h)) <= 2
+    };
+    let mut ring: Vec<f32> = (-6..=6i64)
+        .flat_map(|dy| (-6..=6i64).map(move |dx| (kx + dx, ky + dy)))
+        .filter(|&(x, y)| !near(x, y, kx, ky) && (x.rem_euclid(w), y.rem_euclid(h)) != (0, 0))
+        .map(|(x, y)| spec.at(x, y).norm())
+        .collect();
+    if ring.len() < 16 {
+        return None;
+    }
+    let mid = ring.len() / 2;
+    let median = *ring.select_nth_unstable_by(mid, f32::total_cmp).1;
+    Some(
+        peak as f64
+            / (median as f64)
+                .max(1e-15 * peak as f64)
+                .max(f64::MIN_POSITIVE),
+    )
 }
 
 /// The plane times the separable periodic Hann window (½ − ½cos 2πx/w)(½ − ½cos 2πy/h).
@@ -388,6 +445,59 @@ mod tests {
         for (x, y) in ca.data.iter().zip(&cb.data) {
             assert!((3.0 * x - y).abs() < 1e-4 * y.abs(), "{x} {y}");
         }
+    }
+
+    /// Captures of 64 × 64 pixels, white level 1 with Gaussian noise of σ = 0.05, plus the carrier
+    /// 0.5·cos(2π·0.25x) where `carrier` is set.
+    fn capture(carrier: bool, scale: f32) -> CalibrationFrames {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        let noise = Normal::new(0.0f32, 0.05).unwrap();
+        let plane = (0..64 * 64)
+            .map(|i| {
+                let x = (i % 64) as f32;
+                let tone = if carrier {
+                    0.5 * (std::f32::consts::TAU * 0.25 * x).cos()
+                } else {
+                    0.0
+                };
+                scale * (1.0 + tone + noise.sample(&mut rng))
+            })
+            .collect();
+        let patterns = Cube::from_vec(64, 64, 1, plane).unwrap();
+        CalibrationFrames::single(None, None, patterns, "test".into())
+    }
+
+    /// A carrier under noise stands far above the spectrum around it (by hand: its bin holds
+    /// 0.25·4096 = 1024 against the noise bins' median 1.18·0.05·64/√2 ≈ 2.7, about 380×) and gives
+    /// no warning; noise alone stands under PROMINENT and is named in a warning; the measure
+    /// does not depend on the frame's units.
+    #[test]
+    fn a_carrier_stands_out_of_its_capture_and_noise_does_not() {
+        let design = [Carrier {
+            fx: 0.25,
+            fy: 0.0,
+            phase_rad: 0.0,
+        }];
+        let measure = |carrier, scale| {
+            Calibration::from_frames(&design, &capture(carrier, scale), 4).unwrap()
+        };
+        let tone = measure(true, 1.0);
+        let p = tone.carriers[0].prominence.unwrap();
+        assert!((150.0..500.0).contains(&p), "{p}");
+        assert_eq!(tone.warning(), None);
+        let noise = measure(false, 1.0);
+        let q = noise.carriers[0].prominence.unwrap();
+        assert!((1.0..PROMINENT).contains(&q), "{q}");
+        let w = noise.warning().unwrap();
+        assert!(
+            w.contains("do not stand out") && w.contains("pattern 0 at ("),
+            "{w}"
+        );
+        eprintln!("prominence: carrier {p:.1}, noise alone {q:.2}");
+        let scaled = measure(true, 1000.0).carriers[0].prominence.unwrap();
+        assert!((scaled / p - 1.0).abs() < 1e-3, "{scaled} against {p}");
     }
 
     #[test]

@@ -84,6 +84,7 @@ fn sub_bin_carriers_and_the_crosstalk_mix_match() {
             amplitude: [0.3 + 0.01 * i as f64, -0.2],
             white_level: 1.0,
             shift: [0.0; 2],
+            prominence: None,
         })
         .collect();
     let d = Demux::new(w, h, &carriers(), 0.25)

@@ -64,7 +64,7 @@ pub fn reconstruct<'py>(
         Ok((recon.run(&frame, None)?, cal, recon.frame_snr(&frame)?))
     })?
     .map_err(err)?;
-    if let Some(w) = snr.and_then(snr_warning) {
+    for w in cal.warning().into_iter().chain(snr.and_then(snr_warning)) {
         PyErr::warn(py, &py.get_type::<PyUserWarning>(), &CString::new(w)?, 1)?;
     }
     if !full {

@@ -269,7 +269,7 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let report = RunReport {
         provenance: Provenance::new(lib),
-        warnings: warnings(&rig, &frame, out.joint.as_ref(), &results),
+        warnings: warnings(&rig, &recon, &frame, out.joint.as_ref(), &results),
         frame,
         results,
         experiment: exp.file.clone(),
@@ -298,9 +298,11 @@ pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
     Ok((report, data))
 }
 
-/// The rig's warnings, the frame's, the joint run's, then every result row's flags, named by its stage.
+/// The rig's warnings, its calibration's, the frame's, the joint run's, then every result row's
+/// flags, named by its stage.
 fn warnings(
     rig: &Rig,
+    recon: &Reconstructor,
     frame: &FrameStats,
     joint: Option<&specmux_core::joint::JointStats>,
     results: &[ResultRow],
@@ -313,6 +315,7 @@ fn warnings(
     rig.warnings
         .iter()
         .cloned()
+        .chain(recon.calibration.warning())
         .chain(frame.warnings())
         .chain(joint.and_then(|j| j.warning()))
         .chain(flagged)
