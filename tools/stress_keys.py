@@ -81,13 +81,15 @@ def toml_value(v):
     """A TOML literal of a number, string, bool or list."""
     if isinstance(v, bool):
         return "true" if v else "false"
-    if isinstance(v, float):
-        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+    if isinstance(v, float) and math.isnan(v):
+        return "nan"
+    if isinstance(v, float) and math.isinf(v):
+        return "inf" if v > 0 else "-inf"
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, list):
         return "[" + ", ".join(toml_value(x) for x in v) + "]"
-    return str(v)
+    return repr(v)
 
 
 def to_toml(d, prefix=""):
