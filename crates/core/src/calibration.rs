@@ -275,13 +275,12 @@ fn measure_carrier(
 /// bins exist.
 fn prominence(spec: &HalfSpectrum, kx: i64, ky: i64, peak: f32) -> Option<f64> {
     let (w, h) = (spec.w as i64, spec.h as i64);
-    let near = |x: i64, y: i64, cx: i64, cy: i64| {
-        let d = |a: i64, b: i64, n: i64| (a - b).rem_euclid(n).min((b - a).rem_euclid(n));
-        d(x, cx, w).max(d(y, cy, h)) <= 2
-    };
+    // Chebyshev distance to the peak on the periodic grid.
+    let d = |a: i64, b: i64, n: i64| (a - b).rem_euclid(n).min((b - a).rem_euclid(n));
+    let near = |x: i64, y: i64| d(x, kx, w).max(d(y, ky, h)) <= 2;
     let mut ring: Vec<f32> = (-6..=6i64)
         .flat_map(|dy| (-6..=6i64).map(move |dx| (kx + dx, ky + dy)))
-        .filter(|&(x, y)| !near(x, y, kx, ky) && (x.rem_euclid(w), y.rem_euclid(h)) != (0, 0))
+        .filter(|&(x, y)| !near(x, y) && (x.rem_euclid(w), y.rem_euclid(h)) != (0, 0))
         .map(|(x, y)| spec.at(x, y).norm())
         .collect();
     if ring.len() < 16 {

@@ -560,13 +560,35 @@ mod tests {
         assert_eq!(g.at(30, 0)[0], Complex64::default());
     }
 
-    /// Cumulative (weight, first moment about 550 nm) of flat light on 400–700 nm through `l`.
+    /// The interval lo–hi nm of flat light on 400–700 nm, with its cumulative pair weights
+    /// (weight, first moment about 550 nm).
     #[cfg(feature = "gpu")]
-    fn flat_light_through(l: f64) -> [f64; 2] {
-        [
-            (l - 400.0) / 300.0,
-            ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
-        ]
+    fn flat_interval(lo: f64, hi: f64) -> Interval {
+        let c = |l: f64| {
+            [
+                (l - 400.0) / 300.0,
+                ((l - 550.0).powi(2) - 150.0f64.powi(2)) / 600.0,
+            ]
+        };
+        Interval {
+            lo,
+            hi,
+            c_lo: c(lo),
+            c_hi: c(hi),
+        }
+    }
+
+    /// A bin at (kx, ky) of `value` that passes in `iv` alone.
+    #[cfg(feature = "gpu")]
+    fn one_interval_bin(kx: i64, ky: i64, value: Complex64, iv: Interval) -> PassedBin {
+        PassedBin {
+            kx,
+            ky,
+            value,
+            weight: 0.0,
+            ivs: [iv, Interval::default(), Interval::default()],
+            n: 1,
+        }
     }
 
     /// Bins past [`SLICED_FROM_BINS`] along a streak go to the CPU's slices: the GPU's summer
@@ -576,22 +598,11 @@ mod tests {
     fn the_gpu_summer_hands_a_large_relay_to_the_slices() {
         let Some(gpu) = gpu() else { return };
         // A band 6 000 × 3 bins, each passing 450–650 nm of flat light on 400–700 nm.
-        let c = flat_light_through;
-        let iv = Interval {
-            lo: 450.0,
-            hi: 650.0,
-            c_lo: c(450.0),
-            c_hi: c(650.0),
-        };
         let bins: Vec<PassedBin> = (0..6000i64)
             .flat_map(|kx| (0..3i64).map(move |ky| (kx, ky)))
-            .map(|(kx, ky)| PassedBin {
-                kx,
-                ky,
-                value: Complex64::new((kx % 7) as f64 - 3.0, (ky - 1) as f64 + 0.5),
-                weight: 0.0,
-                ivs: [iv, Interval::default(), Interval::default()],
-                n: 1,
+            .map(|(kx, ky)| {
+                let value = Complex64::new((kx % 7) as f64 - 3.0, (ky - 1) as f64 + 0.5);
+                one_interval_bin(kx, ky, value, flat_interval(450.0, 650.0))
             })
             .collect();
         assert!(bins.len() > SLICED_FROM_BINS && sliced::Plan::new(&bins).is_some());
@@ -607,28 +618,14 @@ mod tests {
     #[test]
     fn gpu_pair_sums_match_the_cpu_along_long_columns() {
         let Some(gpu) = gpu() else { return };
-        let c = flat_light_through;
-        let iv = |lo: f64| Interval {
-            lo,
-            hi: 650.0,
-            c_lo: c(lo),
-            c_hi: c(650.0),
-        };
         let kept = |kx: i64, ky: i64| kx != 2 || ky % 2 != 0 || ky % 64 == 0;
         let bins: Vec<PassedBin> = (0..4i64)
             .flat_map(|kx| (-1500..1500i64).map(move |ky| (kx, ky)))
             .filter(|&(kx, ky)| kept(kx, ky))
-            .map(|(kx, ky)| PassedBin {
-                kx,
-                ky,
-                value: Complex64::new(((ky * 7 + kx) % 5) as f64 - 2.0, 0.5 - kx as f64),
-                weight: 0.0,
-                ivs: [
-                    iv(450.0 + (ky.rem_euclid(9) * 10) as f64),
-                    Interval::default(),
-                    Interval::default(),
-                ],
-                n: 1,
+            .map(|(kx, ky)| {
+                let value = Complex64::new(((ky * 7 + kx) % 5) as f64 - 2.0, 0.5 - kx as f64);
+                let lo = 450.0 + (ky.rem_euclid(9) * 10) as f64;
+                one_interval_bin(kx, ky, value, flat_interval(lo, 650.0))
             })
             .collect();
         assert!(bins.len() < SLICED_FROM_BINS);
@@ -645,7 +642,6 @@ mod tests {
     fn gpu_pair_sums_match_the_cpu_on_random_bins() {
         use rand::{Rng, SeedableRng};
         let Some(gpu) = gpu() else { return };
-        let c = flat_light_through;
         let mut worst = [0.0f64; 2];
         for seed in 0..12u64 {
             let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
@@ -663,12 +659,7 @@ mod tests {
                 ends.sort_by(f64::total_cmp);
                 let mut ivs = [Interval::default(); 3];
                 for (iv, e) in ivs.iter_mut().zip(ends.chunks(2)) {
-                    *iv = Interval {
-                        lo: e[0],
-                        hi: e[1],
-                        c_lo: c(e[0]),
-                        c_hi: c(e[1]),
-                    };
+                    *iv = flat_interval(e[0], e[1]);
                 }
                 let value = Complex64::new(rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0));
                 bins.push(PassedBin {
