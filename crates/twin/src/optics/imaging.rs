@@ -399,14 +399,15 @@ impl Chain {
             .collect()
     }
 
-    /// [`relay_filtered`] for every pattern.
+    /// [`relay_filtered`] for every pattern, in parallel over the patterns as well as within each
+    /// (its serial parts — the pattern's FFT, sorting the passed bins — then overlap).
     pub fn relay_filtered(
         &self,
         f: &FourierFilterConfig,
         displays: &[Display],
     ) -> Result<Vec<IntensitySpectrum>> {
         let dmd = self.cfg.dmd.as_ref();
-        (displays.iter().zip(&self.lights))
+        (displays.par_iter().zip(&self.lights))
             .map(|(d, light)| {
                 relay_filtered(dmd, f, &self.modulator, d, light, self.pairs.as_ref())
             })
@@ -433,13 +434,15 @@ impl Chain {
             .collect()
     }
 
-    /// [`pixel_sampling`] for every pattern: s̃, one plane per carrier.
+    /// [`pixel_sampling`] for every pattern, in parallel: s̃, one plane per carrier.
     pub fn pixel_sampling(&self, images: &[ImageSpectrum]) -> Result<Cube> {
         let (w, h) = (self.width, self.height);
-        let mut out = Cube::zeros(w, h, self.carriers.len());
-        for (i, (image, c)) in images.iter().zip(&self.carriers).enumerate() {
-            out.plane_mut(i)
-                .copy_from_slice(&pixel_sampling(image, c, w, h)?);
+        let planes: Vec<Vec<f32>> = (images.par_iter().zip(&self.carriers))
+            .map(|(image, c)| pixel_sampling(image, c, w, h))
+            .collect::<Result<_>>()?;
+        let mut out = Cube::zeros(w, h, planes.len());
+        for (i, plane) in planes.iter().enumerate() {
+            out.plane_mut(i).copy_from_slice(plane);
         }
         Ok(out)
     }
