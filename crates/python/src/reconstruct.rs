@@ -8,7 +8,6 @@ use crate::experiment::PyExperiment;
 use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use specmux_core::noise::snr_warning;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_report::commands::{frame_calibration, frame_experiment, size_note, Measured};
 use specmux_twin::scene::Materials;
@@ -51,7 +50,7 @@ pub fn reconstruct<'py>(
         .map(|c| calibration::from_dict(c, frame.width, frame.height))
         .transpose()?;
     let lib = library(spectra);
-    let (out, cal, snr) = interruptible(py, move || -> specmux_core::Result<_> {
+    let (out, cal, snr, warnings) = interruptible(py, move || -> specmux_core::Result<_> {
         let materials = Materials::load(&lib)?;
         let rig = Rig::build(&e, &lib, &materials)?;
         let measured = measured.as_ref().map(|frames| Measured {
@@ -61,10 +60,11 @@ pub fn reconstruct<'py>(
         });
         let cal = frame_calibration(&e, &rig, &materials, measured)?;
         let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
-        Ok((recon.run(&frame, None)?, cal, recon.frame_snr(&frame)?))
+        let snr = recon.frame_snr(&frame)?;
+        Ok((recon.run(&frame, None)?, cal, snr, recon.warnings(snr)))
     })?
     .map_err(err)?;
-    for w in cal.warning().into_iter().chain(snr.and_then(snr_warning)) {
+    for w in warnings {
         PyErr::warn(py, &py.get_type::<PyUserWarning>(), &CString::new(w)?, 1)?;
     }
     if !full {

@@ -702,8 +702,7 @@ pub fn reconstruct(
     let mean_snr = recon.frame_snr(&frame)?;
     let mut warnings: Vec<String> = resized
         .into_iter()
-        .chain(cal.warning())
-        .chain(mean_snr.and_then(specmux_core::noise::snr_warning))
+        .chain(recon.warnings(mean_snr))
         .collect();
     for w in &warnings {
         say!(text, "warning: {w}");
