@@ -256,7 +256,9 @@ pub fn in_band_error(
 /// by δ = ±1 changes the in-band error energy by 2δN·e(p) + |P| (N pixels, |P| passband bins),
 /// so the wanted toggle density is −e(p); it is itself error-diffused into a sparse toggle
 /// field q ∈ {−1, 0, +1} (only 0 → 1 or 1 → 0 allowed), which puts the selection's own error
-/// outside the passband. Returns the iterate with the least in-band error.
+/// outside the passband. Returns the iterate with the least in-band error; stops early at zero
+/// in-band error or when no mirror toggles (on the full rig's six patterns after 0, 0, 0, 1, 1
+/// and 8 of the 8 re-dithers allowed).
 fn in_band_feedback(
     target: &[f32],
     w: usize,
@@ -274,10 +276,13 @@ fn in_band_feedback(
         if best.as_ref().map_or(true, |(e, _)| energy < *e) {
             best = Some((energy, b.clone()));
         }
-        if it == iterations {
+        if it == iterations || energy == 0.0 {
             break;
         }
-        diffuse_toggles(&mut b, &err_in_band, w, h);
+        // No toggle: every later iterate would repeat this one.
+        if diffuse_toggles(&mut b, &err_in_band, w, h) == 0 {
+            break;
+        }
     }
     best.map(|(_, b)| b).unwrap_or_default()
 }
@@ -285,8 +290,9 @@ fn in_band_feedback(
 /// Toggles that cancel the in-band error `e`: the densities of switching on (−e where a mirror
 /// is off) and off (e where it is on) are each error-diffused into a sparse set of mirrors.
 /// Diffusing the two signs separately matters: a carrier-frequency error alternates in sign
-/// within a few pixels and would cancel itself in a single diffusion.
-fn diffuse_toggles(b: &mut [f32], e: &[f32], w: usize, h: usize) {
+/// within a few pixels and would cancel itself in a single diffusion. Returns how many mirrors
+/// toggled.
+fn diffuse_toggles(b: &mut [f32], e: &[f32], w: usize, h: usize) -> usize {
     let density = |on: f32| -> Vec<f32> {
         b.iter()
             .zip(e)
@@ -301,13 +307,17 @@ fn diffuse_toggles(b: &mut [f32], e: &[f32], w: usize, h: usize) {
     };
     let up = error_diffusion(&density(1.0), w, h, &FLOYD_STEINBERG);
     let down = error_diffusion(&density(0.0), w, h, &FLOYD_STEINBERG);
+    let mut toggled = 0;
     for ((bv, u), d) in b.iter_mut().zip(&up).zip(&down) {
         if *bv == 0.0 && *u == 1.0 {
             *bv = 1.0;
+            toggled += 1;
         } else if *bv == 1.0 && *d == 1.0 {
             *bv = 0.0;
+            toggled += 1;
         }
     }
+    toggled
 }
 
 #[cfg(test)]
@@ -405,6 +415,22 @@ mod tests {
                 assert!(eb > 5.0 * ef, "bayer {eb} vs fs {ef}");
             }
         }
+    }
+
+    /// The toggle count that stops the feedback is the number of mirrors that changed: a random
+    /// pattern and error toggle some mirrors, and the count says how many; no error, none.
+    #[test]
+    fn the_toggle_count_is_the_number_of_mirrors_changed() {
+        use rand::{Rng, SeedableRng};
+        let (w, h) = (64, 48);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let before: Vec<f32> = (0..w * h).map(|_| rng.gen_range(0..2) as f32).collect();
+        let e: Vec<f32> = (0..w * h).map(|_| rng.gen_range(-0.3..0.3)).collect();
+        let mut b = before.clone();
+        let n = diffuse_toggles(&mut b, &e, w, h);
+        let changed = b.iter().zip(&before).filter(|(x, y)| x != y).count();
+        assert!(n > 0 && n == changed, "{n} toggles, {changed} changed");
+        assert_eq!(diffuse_toggles(&mut b, &vec![0.0; w * h], w, h), 0);
     }
 
     #[test]
