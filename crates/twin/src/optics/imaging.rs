@@ -955,18 +955,23 @@ fn fold_moments(
             (qx, qy, source.map_or(x, |s| x * s.source(qx, qy)), mirrored)
         })
         .collect();
-    let mut torus = vec![Complex64::default(); wf * hf];
-    let at = |qx: i64, qy: i64| {
-        qx.rem_euclid(wf as i64) as usize * hf + qy.rem_euclid(hf as i64) as usize
+    // Only the torus's half kx ≤ wf/2 is kept: each of its cells adds what it receives in the
+    // order the whole torus would.
+    let columns = wf / 2 + 1;
+    let mut half = vec![Complex64::default(); columns * hf];
+    let mut add = |qx: i64, qy: i64, x: Complex64| {
+        let kx = qx.rem_euclid(wf as i64) as usize;
+        if kx < columns {
+            half[kx * hf + qy.rem_euclid(hf as i64) as usize] += x;
+        }
     };
     for (qx, qy, x, mirrored) in values {
-        torus[at(qx, qy)] += x;
+        add(qx, qy, x);
         if mirrored {
-            torus[at(-qx, -qy)] += x.conj();
+            add(-qx, -qy, x.conj());
         }
     }
-    torus[..(wf / 2 + 1) * hf]
-        .iter()
+    half.iter()
         .map(|t| Complex32::new(t.re as f32, t.im as f32))
         .collect()
 }
