@@ -157,18 +157,18 @@ impl Plan {
     /// The pair sums of `bins`, the same cells as the pair loop's (to rounding).
     pub(super) fn sums(&self, bins: &[PassedBin]) -> PairSums {
         let ffts = Transforms::new(self.grid);
-        let zero = || (Spectra::zeros(self.grid), Vec::new());
-        let (spectra, parts) = (self.slices.par_iter())
+        let zero = || (Spectra::zeros(self.grid), Vec::new(), Workspace::default());
+        let (spectra, parts, _) = (self.slices.par_iter())
             .filter(|slice| slice.weight()[0] != 0.0)
-            .fold(zero, |(mut acc, mut parts), slice| {
+            .fold(zero, |(mut acc, mut parts, mut work), slice| {
                 let (whole, part) = slice.split(bins);
-                acc.add(&ffts, &self.shear, slice.weight(), &whole, &part);
+                acc.add(&ffts, &mut work, &self.shear, slice.weight(), &whole, &part);
                 parts.push(part.into_iter().map(|c| c.bin).collect::<Vec<_>>());
-                (acc, parts)
+                (acc, parts, work)
             })
-            .reduce(zero, |(a, mut pa), (b, pb)| {
+            .reduce(zero, |(a, mut pa, work), (b, pb, _)| {
                 pa.extend(pb);
-                (a.plus(b), pa)
+                (a.plus(b), pa, work)
             });
         let mut sums = spectra.sums(&ffts, &self.shear);
         for mut part in parts {
@@ -258,6 +258,16 @@ fn smooth(n: usize) -> usize {
         .expect("smooth numbers are unbounded")
 }
 
+/// One thread's buffers for [`Transforms::forward`] and the slice's two transforms, kept across
+/// its slices (fresh buffers of a few MB each cost their page faults every slice).
+#[derive(Default)]
+struct Workspace {
+    grid: Vec<Complex64>,
+    scratch: Vec<Complex64>,
+    f: Vec<Complex64>,
+    g: Vec<Complex64>,
+}
+
 /// Planned 2-D transforms of the sheared grid: rows s (gs of them), columns t (gt).
 struct Transforms {
     gs: usize,
@@ -281,33 +291,35 @@ impl Transforms {
         }
     }
 
-    /// The transform of `values` placed on the grid's first `rows` rows, transposed: (xt, xs)
-    /// at xt·gs + xs. Only the filled rows are transformed along t.
+    /// The transform of `values` placed on the grid's first `rows` rows, transposed into `out`:
+    /// (xt, xs) at xt·gs + xs. Only the filled rows are transformed along t. `work` holds the
+    /// grid and the scratch between calls, so that a thread's slices reuse their pages.
     fn forward(
         &self,
+        work: &mut Workspace,
         rows: usize,
         values: impl Iterator<Item = ((usize, usize), Complex64)>,
-    ) -> Vec<Complex64> {
+        out: &mut Vec<Complex64>,
+    ) {
         let (gs, gt) = (self.gs, self.gt);
-        let mut grid = vec![Complex64::default(); gs * gt];
+        let grid = &mut work.grid;
+        grid.clear();
+        grid.resize(rows * gt, Complex64::default());
         for ((s, t), v) in values {
             grid[s * gt + t] = v;
         }
-        let mut scratch = vec![
-            Complex64::default();
-            self.t_fwd
-                .get_inplace_scratch_len()
-                .max(self.s_fwd.get_inplace_scratch_len())
-        ];
-        for row in grid[..rows * gt].chunks_exact_mut(gt) {
-            self.t_fwd.process_with_scratch(row, &mut scratch);
+        let scratch_len =
+            (self.t_fwd.get_inplace_scratch_len()).max(self.s_fwd.get_inplace_scratch_len());
+        work.scratch.resize(scratch_len, Complex64::default());
+        for row in grid.chunks_exact_mut(gt) {
+            self.t_fwd.process_with_scratch(row, &mut work.scratch);
         }
-        let mut out = vec![Complex64::default(); gs * gt];
-        transpose::transpose(&grid, &mut out, gt, gs);
+        grid.resize(gs * gt, Complex64::default());
+        out.resize(gs * gt, Complex64::default());
+        transpose::transpose(grid, out, gt, gs);
         for row in out.chunks_exact_mut(gs) {
-            self.s_fwd.process_with_scratch(row, &mut scratch);
+            self.s_fwd.process_with_scratch(row, &mut work.scratch);
         }
-        out
     }
 
     /// The inverse of [`Transforms::forward`] for a real spectrum, normalised: (ds, dt) at
@@ -358,6 +370,7 @@ impl Spectra {
     fn add(
         &mut self,
         ffts: &Transforms,
+        work: &mut Workspace,
         shear: &Shear,
         dw: [f64; 2],
         whole: &[&PassedBin],
@@ -367,23 +380,26 @@ impl Spectra {
             return;
         }
         let rows = shear.len.x as usize;
-        let f = ffts.forward(
+        let (mut f, mut g) = (std::mem::take(&mut work.f), std::mem::take(&mut work.g));
+        let placed = |b: &PassedBin| shear.place(b.kx, b.ky);
+        ffts.forward(
+            work,
             rows,
-            whole.iter().map(|b| (shear.place(b.kx, b.ky), b.value)),
+            whole.iter().map(|b| (placed(b), b.value)),
+            &mut f,
         );
         for (c, a) in self.a.iter_mut().enumerate() {
-            let g = (!part.is_empty()).then(|| {
-                ffts.forward(
-                    rows,
-                    part.iter()
-                        .map(|p| (shear.place(p.bin.kx, p.bin.ky), p.bin.value * p.w[c])),
-                )
-            });
+            let crossed = !part.is_empty();
+            if crossed {
+                let values = part.iter().map(|p| (placed(&p.bin), p.bin.value * p.w[c]));
+                ffts.forward(work, rows, values, &mut g);
+            }
             for (i, (a, x)) in a.iter_mut().zip(&f).enumerate() {
-                let cross = g.as_ref().map_or(0.0, |g| (x * g[i].conj()).re);
+                let cross = if crossed { (x * g[i].conj()).re } else { 0.0 };
                 *a += dw[c] * x.norm_sqr() + 2.0 * cross;
             }
         }
+        (work.f, work.g) = (f, g);
     }
 
     /// The sums these spectra hold, on the sheared lattice's half differences.
