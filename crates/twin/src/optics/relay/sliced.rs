@@ -258,14 +258,20 @@ fn smooth(n: usize) -> usize {
         .expect("smooth numbers are unbounded")
 }
 
-/// One thread's buffers for [`Transforms::forward`] and the slice's two transforms, kept across
-/// its slices (fresh buffers of a few MB each cost their page faults every slice).
+/// One thread's buffers, kept across its slices (fresh buffers of a few MB each cost their page
+/// faults every slice): [`Transforms::forward`]'s own, and the slice's two transforms.
 #[derive(Default)]
 struct Workspace {
-    grid: Vec<Complex64>,
-    scratch: Vec<Complex64>,
+    scratch: Scratch,
     f: Vec<Complex64>,
     g: Vec<Complex64>,
+}
+
+/// The grid and the FFT scratch of [`Transforms::forward`].
+#[derive(Default)]
+struct Scratch {
+    grid: Vec<Complex64>,
+    fft: Vec<Complex64>,
 }
 
 /// Planned 2-D transforms of the sheared grid: rows s (gs of them), columns t (gt).
@@ -292,17 +298,16 @@ impl Transforms {
     }
 
     /// The transform of `values` placed on the grid's first `rows` rows, transposed into `out`:
-    /// (xt, xs) at xt·gs + xs. Only the filled rows are transformed along t. `work` holds the
-    /// grid and the scratch between calls, so that a thread's slices reuse their pages.
+    /// (xt, xs) at xt·gs + xs. Only the filled rows are transformed along t.
     fn forward(
         &self,
-        work: &mut Workspace,
+        scratch: &mut Scratch,
         rows: usize,
         values: impl Iterator<Item = ((usize, usize), Complex64)>,
         out: &mut Vec<Complex64>,
     ) {
         let (gs, gt) = (self.gs, self.gt);
-        let grid = &mut work.grid;
+        let grid = &mut scratch.grid;
         grid.clear();
         grid.resize(rows * gt, Complex64::default());
         for ((s, t), v) in values {
@@ -310,15 +315,15 @@ impl Transforms {
         }
         let scratch_len =
             (self.t_fwd.get_inplace_scratch_len()).max(self.s_fwd.get_inplace_scratch_len());
-        work.scratch.resize(scratch_len, Complex64::default());
+        scratch.fft.resize(scratch_len, Complex64::default());
         for row in grid.chunks_exact_mut(gt) {
-            self.t_fwd.process_with_scratch(row, &mut work.scratch);
+            self.t_fwd.process_with_scratch(row, &mut scratch.fft);
         }
         grid.resize(gs * gt, Complex64::default());
         out.resize(gs * gt, Complex64::default());
         transpose::transpose(grid, out, gt, gs);
         for row in out.chunks_exact_mut(gs) {
-            self.s_fwd.process_with_scratch(row, &mut work.scratch);
+            self.s_fwd.process_with_scratch(row, &mut scratch.fft);
         }
     }
 
@@ -380,26 +385,21 @@ impl Spectra {
             return;
         }
         let rows = shear.len.x as usize;
-        let (mut f, mut g) = (std::mem::take(&mut work.f), std::mem::take(&mut work.g));
+        let Workspace { scratch, f, g } = work;
         let placed = |b: &PassedBin| shear.place(b.kx, b.ky);
-        ffts.forward(
-            work,
-            rows,
-            whole.iter().map(|b| (placed(b), b.value)),
-            &mut f,
-        );
+        let whole = whole.iter().map(|b| (placed(b), b.value));
+        ffts.forward(scratch, rows, whole, f);
         for (c, a) in self.a.iter_mut().enumerate() {
             let crossed = !part.is_empty();
             if crossed {
                 let values = part.iter().map(|p| (placed(&p.bin), p.bin.value * p.w[c]));
-                ffts.forward(work, rows, values, &mut g);
+                ffts.forward(scratch, rows, values, g);
             }
-            for (i, (a, x)) in a.iter_mut().zip(&f).enumerate() {
+            for (i, (a, x)) in a.iter_mut().zip(f.iter()).enumerate() {
                 let cross = if crossed { (x * g[i].conj()).re } else { 0.0 };
                 *a += dw[c] * x.norm_sqr() + 2.0 * cross;
             }
         }
-        (work.f, work.g) = (f, g);
     }
 
     /// The sums these spectra hold, on the sheared lattice's half differences.
