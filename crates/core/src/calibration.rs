@@ -494,7 +494,6 @@ mod tests {
             w.contains("do not stand out") && w.contains("pattern 0 at ("),
             "{w}"
         );
-        eprintln!("prominence: carrier {p:.1}, noise alone {q:.2}");
         let scaled = measure(true, 1000.0).carriers[0].prominence.unwrap();
         assert!((scaled / p - 1.0).abs() < 1e-3, "{scaled} against {p}");
     }
