@@ -7,7 +7,6 @@ use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use specmux_twin::captures::CalibrationSource;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
@@ -35,10 +34,8 @@ pub fn simulate<'py>(
     let (sim, stages, frames) = interruptible(py, move || -> specmux_core::Result<_> {
         let materials = Materials::load(&lib)?;
         let rig = Rig::build(&e, &lib, &materials)?;
-        let (sim, stages) = Pipeline::build(&e, &rig, &materials)?.run()?;
-        let frames = (e.calibration.source == CalibrationSource::Captures)
-            .then(|| specmux_twin::run::calibration_frames(&e, &rig, &sim))
-            .transpose()?;
+        let (sim, mut stages) = Pipeline::build(&e, &rig, &materials)?.run()?;
+        let frames = specmux_twin::run::captured_calibration(&e, &rig, &sim, &mut stages)?;
         Ok((sim, stages, frames))
     })?
     .map_err(err)?;

@@ -8,7 +8,6 @@ use specmux_core::unmix::UnmixStats;
 use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
-use specmux_twin::captures::CalibrationSource;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::rig::Rig;
 use specmux_twin::run::{self, RunData, RunReport};
@@ -597,22 +596,29 @@ pub fn simulate(
     if explain {
         return Ok(text);
     }
-    let (sim, times) = pipeline.run()?;
+    let (sim, mut times) = pipeline.run()?;
+    let frames = run::captured_calibration(&exp, &rig, &sim, &mut times)?;
+    let t = std::time::Instant::now();
     let files = OutputSet::begin(out)?;
     write_cube(&files, "frame", &sim.frame, &["Y".to_string()], npy)?;
     specmux_io::png::plane_png(&files.path("frame.png"), &sim.frame, 0)?;
     let scene = &sim.scene;
     write_cube(&files, "truth", &scene.cube, &band_names(&scene.grid), npy)?;
-    if exp.calibration.source == CalibrationSource::Captures {
-        let frames = run::calibration_frames(&exp, &rig, &sim)?;
+    if let Some(frames) = &frames {
         let dir = files.path("calibration");
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        specmux_io::frame::write_calibration(&dir, &frames)?;
+        specmux_io::frame::write_calibration(&dir, frames)?;
     }
+    times.push(specmux_twin::forward::StageTime {
+        stage: "write-files".to_string(),
+        seconds: t.elapsed().as_secs_f64(),
+    });
     write_report(&files.path("simulate.json"), lib, "stages", &times)?;
     for t in &times {
-        say!(text, "{:<15} {:>8.4} s", t.stage, t.seconds);
+        say!(text, "{:<20} {:>8.4} s", t.stage, t.seconds);
     }
+    let total: f64 = times.iter().map(|t| t.seconds).sum();
+    say!(text, "{:<20} {:>8.4} s", "total", total);
     finish(files, out, &mut text)?;
     Ok(text)
 }

@@ -228,6 +228,26 @@ pub fn calibration_frames(
     captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())
 }
 
+/// The frames the rig's calibration captures (None for `[calibration] source = "oracle"`, which
+/// captures nothing), their time added to `times` as the stage `calibration-captures`.
+pub fn captured_calibration(
+    exp: &Experiment,
+    rig: &Rig,
+    sim: &Simulated,
+    times: &mut Vec<StageTime>,
+) -> Result<Option<CalibrationFrames>> {
+    if exp.calibration.source != captures::CalibrationSource::Captures {
+        return Ok(None);
+    }
+    let t = Instant::now();
+    let frames = calibration_frames(exp, rig, sim)?;
+    times.push(StageTime {
+        stage: "calibration-captures".to_string(),
+        seconds: t.elapsed().as_secs_f64(),
+    });
+    Ok(Some(frames))
+}
+
 /// The core's calibration from the frames the twin captures for this rig.
 pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
     let frames = calibration_frames(exp, rig, sim)?;
