@@ -1,5 +1,6 @@
 //! Noise generation of the EMVA 1288 camera for one prototype-sized frame (768 × 768): the
-//! photon-transfer chain of `Sensor::capture` with the default GO-5000-class parameters.
+//! photon-transfer chain of `Sensor::capture` with the default GO-5000-class parameters, and a
+//! calibration capture (`Sensor::averaged_capture`, 16 exposures averaged).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use specmux_core::Cube;
@@ -20,6 +21,12 @@ fn capture(c: &mut Criterion) {
         b.iter(|| {
             frame += 1;
             black_box(sensor.capture(&mean, frame).unwrap())
+        })
+    });
+    c.bench_function("sensor averaged capture 768x768 x16", |b| {
+        b.iter(|| {
+            frame += 1;
+            black_box(sensor.averaged_capture(&mean, 16, frame).unwrap())
         })
     });
 }

@@ -26,6 +26,7 @@ pub use ptc::{
 };
 pub use radiometry::{photo_electrons, SpectralIrradiance};
 
+use poisson::Poisson;
 use rand::Rng;
 use rand_distr::StandardNormal;
 use rand_pcg::Pcg64Mcg;
@@ -172,7 +173,9 @@ impl Sensor {
 
     /// Average of `n_average` frames with no light (DN): the dark frame of the calibration.
     pub fn dark_frame(&self, n_average: usize) -> Result<Cube> {
-        self.average(n_average, |k| self.dark_exposure(k))
+        let zeros = vec![0f32; self.width * self.height];
+        let keys: Vec<u64> = (0..n_average as u64).collect();
+        self.averaged(&zeros, Stream::Dark, &keys)
     }
 
     /// Dark exposure number `k` (DN): the frames [`Sensor::dark_frame`] averages.
@@ -186,18 +189,16 @@ impl Sensor {
     pub fn averaged_capture(&self, mean_e: &Cube, n_average: usize, key: u64) -> Result<Cube> {
         self.check_frame(mean_e, "mean photo-electrons")?;
         let key = splitmix64(key);
-        self.average(n_average, |k| {
-            self.expose(&mean_e.data, Stream::Calibration, key ^ k as u64)
-        })
+        let keys: Vec<u64> = (0..n_average as u64).map(|k| key ^ k).collect();
+        self.averaged(&mean_e.data, Stream::Calibration, &keys)
     }
 
     /// Average of `n_average` frames of a uniform light of `level_e` mean photo-electrons (DN).
     /// Different levels use unrelated noise.
     pub fn flat_frame(&self, level_e: f64, n_average: usize) -> Result<Cube> {
         let flat = self.uniform_light(level_e)?;
-        self.average(n_average, |k| {
-            self.expose(&flat, Stream::Flat, flat_key(level_e, k))
-        })
+        let keys: Vec<u64> = (0..n_average).map(|k| flat_key(level_e, k)).collect();
+        self.averaged(&flat, Stream::Flat, &keys)
     }
 
     /// Flat exposure number `k` at `level_e` (DN): the frames [`Sensor::flat_frame`] averages.
@@ -214,24 +215,6 @@ impl Sensor {
             )));
         }
         Ok(vec![level_e as f32; self.width * self.height])
-    }
-
-    /// Pixel-wise mean of `n` frames made by `frame(k)`, summed in f64.
-    fn average(&self, n: usize, frame: impl Fn(usize) -> Cube) -> Result<Cube> {
-        if n == 0 {
-            return Err(Error::Numerical(
-                "averaging needs at least one frame (n_average = 0)".into(),
-            ));
-        }
-        let mut sum = vec![0f64; self.width * self.height];
-        for k in 0..n {
-            let f = frame(k);
-            sum.par_iter_mut()
-                .zip(f.data.par_iter())
-                .for_each(|(s, &v)| *s += v as f64);
-        }
-        let data = sum.into_iter().map(|s| (s / n as f64) as f32).collect();
-        Cube::from_vec(self.width, self.height, 1, data)
     }
 
     /// A one-plane frame of the sensor's size with finite values ≥ 0.
@@ -258,13 +241,32 @@ impl Sensor {
 
     /// The photon-transfer chain for checked means, one generator per row.
     fn expose(&self, mean_e: &[f32], stream: Stream, frame: u64) -> Cube {
+        self.exposures_averaged(mean_e, stream, &[frame])
+    }
+
+    /// The pixel-wise mean of the exposures of checked means under `keys` (at least one).
+    fn averaged(&self, mean_e: &[f32], stream: Stream, keys: &[u64]) -> Result<Cube> {
+        if keys.is_empty() {
+            return Err(Error::Numerical(
+                "averaging needs at least one frame (n_average = 0)".into(),
+            ));
+        }
+        Ok(self.exposures_averaged(mean_e, stream, keys))
+    }
+
+    /// The mean of one exposure per key, each the frame [`Sensor::expose`] makes under its key
+    /// (its own generator per row), summed in f64 in the order of `keys`. Pixel by pixel, so
+    /// that a pixel's sampler is set up once for all its exposures and no frame is stored.
+    fn exposures_averaged(&self, mean_e: &[f32], stream: Stream, keys: &[u64]) -> Cube {
         let mut out = Cube::zeros(self.width, self.height, 1);
         let w = self.width;
         out.data.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
-            let mut rng = row_rng(self.cfg.seed, stream, frame, y);
+            let mut rngs: Vec<Pcg64Mcg> = (keys.iter())
+                .map(|&k| row_rng(self.cfg.seed, stream, k, y))
+                .collect();
             let span = y * w..(y + 1) * w;
             self.expose_row(
-                &mut rng,
+                &mut rngs,
                 &mean_e[span.clone()],
                 self.prnu.as_ref().map(|m| &m[span.clone()]),
                 self.dsnu.as_ref().map(|m| &m[span]),
@@ -274,31 +276,55 @@ impl Sensor {
         out
     }
 
+    /// One row: for each pixel, one exposure from each generator, averaged (a single generator
+    /// is kept in registers: the one-frame capture of the scene).
     #[inline]
     fn expose_row(
         &self,
-        rng: &mut Pcg64Mcg,
+        rngs: &mut [Pcg64Mcg],
         mean_e: &[f32],
         prnu: Option<&[f32]>,
         dsnu: Option<&[f32]>,
         out: &mut [f32],
     ) {
-        let c = &self.cfg;
-        let max_dn = self.max_dn();
-        for (x, dst) in out.iter_mut().enumerate() {
+        let pixel = |x: usize| {
             let light = mean_e[x] as f64 * prnu.map_or(1.0, |g| g[x] as f64);
-            let mut e = poisson::sample(rng, light + self.dark_e);
-            if c.read_noise_e > 0.0 {
-                e += c.read_noise_e * rng.sample::<f64, _>(StandardNormal);
+            (
+                Poisson::new(light + self.dark_e),
+                dsnu.map_or(0.0, |d| d[x] as f64),
+            )
+        };
+        if let [rng] = rngs {
+            let mut rng = rng.clone();
+            for (x, dst) in out.iter_mut().enumerate() {
+                let (mut poisson, offset) = pixel(x);
+                *dst = self.exposure_dn(&mut poisson, &mut rng, offset) as f32;
             }
-            if let Some(d) = dsnu {
-                e += d[x] as f64;
-            }
-            // The ADC: clip to the rails, then round half up (the rails are integers, so the
-            // order does not matter; fast_floor avoids a libm call per pixel).
-            let dn = c.gain_dn_per_e * e.min(c.full_well_e) + c.black_offset_dn;
-            *dst = poisson::fast_floor(dn.clamp(0.0, max_dn) + 0.5) as f32;
+            return;
         }
+        let n = rngs.len() as f64;
+        for (x, dst) in out.iter_mut().enumerate() {
+            let (mut poisson, offset) = pixel(x);
+            let sum = (rngs.iter_mut())
+                .map(|rng| self.exposure_dn(&mut poisson, rng, offset) as f32 as f64)
+                .fold(0.0, |s, v| s + v);
+            *dst = (sum / n) as f32;
+        }
+    }
+
+    /// One pixel's reading in DN: shot noise, read noise, the DSNU `offset` (e⁻), the full
+    /// well, then the ADC, which clips to its rails and rounds half up (the rails are integers,
+    /// so the order does not matter; fast_floor avoids a libm call per pixel).
+    #[inline(always)]
+    fn exposure_dn(&self, poisson: &mut Poisson, rng: &mut Pcg64Mcg, offset: f64) -> f64 {
+        let c = &self.cfg;
+        let mut e = poisson.sample(rng);
+        if c.read_noise_e > 0.0 {
+            e += c.read_noise_e * rng.sample::<f64, _>(StandardNormal);
+        }
+        e += offset;
+        let dn = c.gain_dn_per_e * e.min(c.full_well_e) + c.black_offset_dn;
+        poisson::fast_floor(dn.clamp(0.0, self.max_dn()) + 0.5)
     }
 }
 

@@ -45,20 +45,86 @@ pub(crate) fn fast_floor(x: f64) -> f64 {
     }
 }
 
-/// One Poisson(λ) draw as f64; λ must be finite and ≥ 0 (the caller checks).
-#[inline]
-pub fn sample<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
-    if lambda <= 0.0 {
-        0.0
-    } else if lambda < PTRS_MIN_MEAN {
-        knuth(rng, lambda)
-    } else {
-        ptrs(rng, lambda)
+/// Poisson(λ) for one mean, its constants computed once: a pixel's mean is the same in every
+/// exposure a capture averages, so they are drawn from one `Poisson` (the draws are those of
+/// computing the constants anew each time, bit for bit).
+#[derive(Clone, Copy, Debug)]
+pub struct Poisson {
+    lambda: f64,
+    method: Method,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Method {
+    Zero,
+    /// Knuth's method: e^{−λ}.
+    Knuth {
+        limit: f64,
+    },
+    /// PTRS: b, a, v_r, and what only the draws outside the squeeze need (1/α and ln λ,
+    /// computed at the first such draw: a single exposure seldom needs them).
+    Ptrs {
+        b: f64,
+        a: f64,
+        v_r: f64,
+        tail: Option<(f64, f64)>,
+    },
+}
+
+impl Poisson {
+    /// The sampler for mean `lambda`, which must be finite and ≥ 0 (the caller checks).
+    pub fn new(lambda: f64) -> Poisson {
+        let method = if lambda <= 0.0 {
+            Method::Zero
+        } else if lambda < PTRS_MIN_MEAN {
+            Method::Knuth {
+                limit: (-lambda).exp(),
+            }
+        } else {
+            let b = 0.931 + 2.53 * lambda.sqrt();
+            Method::Ptrs {
+                b,
+                a: -0.059 + 0.02483 * b,
+                v_r: 0.9277 - 3.6224 / (b - 2.0),
+                tail: None,
+            }
+        };
+        Poisson { lambda, method }
+    }
+
+    /// One draw as f64.
+    #[inline]
+    pub fn sample<R: Rng + ?Sized>(&mut self, rng: &mut R) -> f64 {
+        let lambda = self.lambda;
+        let (b, a, v_r, tail) = match &mut self.method {
+            Method::Zero => return 0.0,
+            Method::Knuth { limit } => return knuth(rng, *limit),
+            Method::Ptrs { b, a, v_r, tail } => (*b, *a, *v_r, tail),
+        };
+        loop {
+            let u = rng.gen::<f64>() - 0.5;
+            let v: f64 = rng.gen();
+            let us = 0.5 - u.abs();
+            let k = fast_floor((2.0 * a / us + b) * u + lambda + 0.43);
+            if us >= 0.07 && v <= v_r {
+                return k;
+            }
+            if k < 0.0 || (us < 0.013 && v > us) {
+                continue;
+            }
+            // Only the draws outside the squeeze (about 1 in 10) need α and the logarithms.
+            let (inv_alpha, ln_lambda) =
+                *tail.get_or_insert_with(|| (1.1239 + 1.1328 / (b - 3.4), lambda.ln()));
+            let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
+            if lhs <= -lambda + k * ln_lambda - ln_factorial(k) {
+                return k;
+            }
+        }
     }
 }
 
-fn knuth<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
-    let limit = (-lambda).exp();
+/// Knuth's method: the number of uniforms whose running product stays above `limit` = e^{−λ}.
+fn knuth<R: Rng + ?Sized>(rng: &mut R, limit: f64) -> f64 {
     let mut k = 0.0;
     let mut prod: f64 = rng.gen();
     while prod > limit {
@@ -66,30 +132,6 @@ fn knuth<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
         prod *= rng.gen::<f64>();
     }
     k
-}
-
-fn ptrs<R: Rng + ?Sized>(rng: &mut R, lambda: f64) -> f64 {
-    let b = 0.931 + 2.53 * lambda.sqrt();
-    let a = -0.059 + 0.02483 * b;
-    let v_r = 0.9277 - 3.6224 / (b - 2.0);
-    loop {
-        let u = rng.gen::<f64>() - 0.5;
-        let v: f64 = rng.gen();
-        let us = 0.5 - u.abs();
-        let k = fast_floor((2.0 * a / us + b) * u + lambda + 0.43);
-        if us >= 0.07 && v <= v_r {
-            return k;
-        }
-        if k < 0.0 || (us < 0.013 && v > us) {
-            continue;
-        }
-        // Only the draws outside the squeeze (about 1 in 10) need α and the logarithms.
-        let inv_alpha = 1.1239 + 1.1328 / (b - 3.4);
-        let lhs = (v * inv_alpha / (a / (us * us) + b)).ln();
-        if lhs <= -lambda + k * lambda.ln() - ln_factorial(k) {
-            return k;
-        }
-    }
 }
 
 #[cfg(test)]
@@ -116,8 +158,9 @@ mod tests {
         let mut rng = Pcg64Mcg::new(seed);
         let kmax = (lambda + 12.0 * lambda.sqrt() + 20.0) as usize;
         let mut counts = vec![0f64; kmax + 1];
+        let mut poisson = Poisson::new(lambda);
         for _ in 0..n {
-            let k = sample(&mut rng, lambda) as usize;
+            let k = poisson.sample(&mut rng) as usize;
             counts[k.min(kmax)] += 1.0;
         }
         let pmf: Vec<f64> = (0..=kmax)
@@ -184,6 +227,6 @@ mod tests {
     #[test]
     fn zero_mean_gives_zero() {
         let mut rng = Pcg64Mcg::new(1);
-        assert_eq!(sample(&mut rng, 0.0), 0.0);
+        assert_eq!(Poisson::new(0.0).sample(&mut rng), 0.0);
     }
 }

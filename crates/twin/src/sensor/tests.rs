@@ -560,3 +560,23 @@ fn ptc_frames_are_the_frames_photon_transfer_measured() {
     assert_eq!(mean, avg.data);
     assert_eq!(f.flat_sequence.0, r.prnu_level_e);
 }
+
+/// An averaged capture draws each pixel's exposures together (its sampler set up once), yet
+/// it is the f64 mean of the exposures drawn one frame at a time, to the bit: at a level PTRS
+/// samples and at one Knuth's method does.
+#[test]
+fn a_flat_frame_is_the_mean_of_its_exposures() {
+    let sensor = Sensor::new(&SensorConfig::default(), 24, 16).unwrap();
+    for level in [7500.0, 4.0] {
+        let n = 5;
+        let avg = sensor.flat_frame(level, n).unwrap();
+        let frames: Vec<Cube> = (0..n)
+            .map(|k| sensor.flat_exposure(level, k).unwrap())
+            .collect();
+        let mean: Vec<f32> = (0..avg.data.len())
+            .map(|i| (frames.iter().map(|c| c.data[i] as f64).sum::<f64>() / n as f64) as f32)
+            .collect();
+        assert_eq!(mean, avg.data, "level {level} e⁻");
+        assert_ne!(frames[0].data, frames[1].data);
+    }
+}
