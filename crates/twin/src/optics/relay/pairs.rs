@@ -120,7 +120,11 @@ pub(super) fn add_pairs(bins: &[PassedBin], sums: &mut PairSums) {
     let map = sums.map;
     let h = map.len.y as usize;
     let at: Vec<_> = bins.iter().map(|b| map.image(b.kx, b.ky)).collect();
-    let per_task = (map.len.x as usize).div_ceil(64).max(1);
+    // Four tasks a thread balance the load; more only repeat the searches below per task (the
+    // sums by slices call this once per slice on a few thousand bins). A cell's pairs are added
+    // in the order of a whatever the split, so the sums do not depend on it.
+    let tasks = (4 * rayon::current_num_threads()).clamp(1, 64);
+    let per_task = (map.len.x as usize).div_ceil(tasks).max(1);
     let [s0, s1] = &mut sums.s;
     s0.par_chunks_mut(per_task * h)
         .zip(s1.par_chunks_mut(per_task * h))
