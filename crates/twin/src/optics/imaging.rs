@@ -849,17 +849,21 @@ fn coherent_throughput(bins: &[PassedBin], source: &ModulatorSpectrum, grid: &Gr
         sums
     };
     let (rx, ry) = (residues(wc), residues(hc));
-    let energy = |bx: i64, by: i64| {
-        let v = source.coarse.at(bx, by);
-        Complex64::new(v.re as f64, v.im as f64).norm_sqr()
-    };
-    let all: f64 = (0..wc as i64)
-        .into_par_iter()
-        .map(|bx| {
-            let row: f64 = (0..hc as i64)
-                .map(|by| energy(bx, by) * ry[by as usize])
-                .sum();
-            row * rx[bx as usize]
+    // The stored half: column kx holds bins (kx, ky) and, but for kx = 0 and kx = wc/2, their
+    // mirrors (wc − kx, −ky) of the same energy.
+    let ry_mirrored: Vec<f64> = (0..hc).map(|by| ry[(hc - by) % hc]).collect();
+    let coarse = &source.coarse;
+    let all: f64 = (coarse.data.par_chunks(hc).enumerate())
+        .map(|(kx, column)| {
+            let (mut own, mut mirrored) = (0.0, 0.0);
+            for ((v, a), b) in column.iter().zip(&ry).zip(&ry_mirrored) {
+                let e = Complex64::new(v.re as f64, v.im as f64).norm_sqr();
+                own += e * a;
+                mirrored += e * b;
+            }
+            let mirror = wc - kx;
+            let has_mirror = kx != 0 && mirror != kx;
+            own * rx[kx] + if has_mirror { mirrored * rx[mirror] } else { 0.0 }
         })
         .sum();
     let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();
