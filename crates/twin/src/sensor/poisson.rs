@@ -73,6 +73,7 @@ enum Method {
 
 impl Poisson {
     /// The sampler for mean `lambda`, which must be finite and ≥ 0 (the caller checks).
+    #[inline(always)]
     pub fn new(lambda: f64) -> Poisson {
         let method = if lambda <= 0.0 {
             Method::Zero
@@ -93,7 +94,7 @@ impl Poisson {
     }
 
     /// One draw as f64.
-    #[inline]
+    #[inline(always)]
     pub fn sample<R: Rng + ?Sized>(&mut self, rng: &mut R) -> f64 {
         let lambda = self.lambda;
         let (b, a, v_r, tail) = match &mut self.method {
