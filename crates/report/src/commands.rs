@@ -609,10 +609,7 @@ pub fn simulate(
         std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
         specmux_io::frame::write_calibration(&dir, frames)?;
     }
-    times.push(specmux_twin::forward::StageTime {
-        stage: "write-files".to_string(),
-        seconds: t.elapsed().as_secs_f64(),
-    });
+    times.push(specmux_twin::forward::StageTime::since("write-files", t));
     write_report(&files.path("simulate.json"), lib, "stages", &times)?;
     for t in &times {
         say!(text, "{:<20} {:>8.4} s", t.stage, t.seconds);

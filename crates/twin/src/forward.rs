@@ -65,6 +65,16 @@ pub struct StageTime {
     pub seconds: f64,
 }
 
+impl StageTime {
+    /// The wall time of `stage` from `start` until now.
+    pub fn since(stage: &str, start: Instant) -> StageTime {
+        StageTime {
+            stage: stage.to_string(),
+            seconds: start.elapsed().as_secs_f64(),
+        }
+    }
+}
+
 /// x_i: the scene seen through each wheel filter, and white's value in each.
 pub struct Channels {
     pub x: Cube,
@@ -123,10 +133,7 @@ fn timed<In, Out>(times: &mut Vec<StageTime>, step: &dyn Step<In, Out>, input: &
     specmux_core::interrupt::check(&format!("the {} stage", step.name()))?;
     let t = Instant::now();
     let out = step.run(input)?;
-    times.push(StageTime {
-        stage: step.name().to_string(),
-        seconds: t.elapsed().as_secs_f64(),
-    });
+    times.push(StageTime::since(step.name(), t));
     Ok(out)
 }
 

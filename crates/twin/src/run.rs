@@ -241,10 +241,7 @@ pub fn captured_calibration(
     }
     let t = Instant::now();
     let frames = calibration_frames(exp, rig, sim)?;
-    times.push(StageTime {
-        stage: "calibration-captures".to_string(),
-        seconds: t.elapsed().as_secs_f64(),
-    });
+    times.push(StageTime::since("calibration-captures", t));
     Ok(Some(frames))
 }
 

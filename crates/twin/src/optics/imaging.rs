@@ -862,8 +862,12 @@ fn coherent_throughput(bins: &[PassedBin], source: &ModulatorSpectrum, grid: &Gr
                 mirrored += e * b;
             }
             let mirror = wc - kx;
-            let has_mirror = kx != 0 && mirror != kx;
-            own * rx[kx] + if has_mirror { mirrored * rx[mirror] } else { 0.0 }
+            let mirrors = if kx != 0 && mirror != kx {
+                mirrored * rx[mirror]
+            } else {
+                0.0
+            };
+            own * rx[kx] + mirrors
         })
         .sum();
     let passed: f64 = bins.iter().map(|b| b.value.norm_sqr() * b.weight).sum();

@@ -389,8 +389,8 @@ impl Spectra {
         let placed = |b: &PassedBin| shear.place(b.kx, b.ky);
         let whole = whole.iter().map(|b| (placed(b), b.value));
         ffts.forward(scratch, rows, whole, f);
+        let crossed = !part.is_empty();
         for (c, a) in self.a.iter_mut().enumerate() {
-            let crossed = !part.is_empty();
             if crossed {
                 let values = part.iter().map(|p| (placed(&p.bin), p.bin.value * p.w[c]));
                 ffts.forward(scratch, rows, values, g);
