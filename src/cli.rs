@@ -16,8 +16,9 @@ pub struct Cli {
     /// this binary).
     #[arg(long, global = true)]
     pub spectra: Option<PathBuf>,
-    /// Keep the imaged patterns of every optical chain in this folder and read them back when a
-    /// later run uses the same chain (default: $SPECMUX_PATTERN_CACHE; unset: no cache).
+    /// Keep the imaged patterns of every optical chain and the calibration captures of every rig
+    /// and camera in this folder, and read them back when a later run uses the same chain or
+    /// rig (default: $SPECMUX_PATTERN_CACHE; unset: no cache).
     #[arg(long, global = true, value_name = "DIR")]
     pub pattern_cache: Option<PathBuf>,
     #[command(subcommand)]

@@ -11,7 +11,7 @@ use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_summer_for;
-use crate::pattern_cache::PatternCache;
+use crate::pattern_cache::{Entry, PatternCache};
 use crate::rig::Rig;
 use crate::scene;
 use crate::scene::Materials;
@@ -324,7 +324,7 @@ impl Stage for PatternCacheStage {
         "pattern-cache"
     }
     fn describe(&self) -> String {
-        let path = self.cache.path(&self.key);
+        let path = self.cache.path(Entry::Patterns, &self.key);
         match path.exists() {
             true => format!(
                 "s̃_k read from {} (an earlier run of this chain left it there; the optical stages below do not run unless it holds another chain)",
@@ -347,14 +347,14 @@ impl PatternCacheStage {
         image: impl FnOnce(&mut Vec<StageTime>) -> Result<Cube>,
     ) -> Result<Cube> {
         let t = Instant::now();
-        let cached = self.cache.load(&self.key)?;
+        let cached = self.cache.load(Entry::Patterns, &self.key)?;
         let mut seconds = t.elapsed().as_secs_f64();
         let patterns = match cached {
             Some(p) => p,
             None => {
                 let p = image(times)?;
                 let t = Instant::now();
-                self.cache.store(&self.key, &p)?;
+                self.cache.store(Entry::Patterns, &self.key, &p)?;
                 seconds += t.elapsed().as_secs_f64();
                 p
             }

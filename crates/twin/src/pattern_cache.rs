@@ -1,8 +1,10 @@
-//! The imaged patterns s̃_k kept between runs, one file per optical chain (`--pattern-cache DIR`
-//! or `$SPECMUX_PATTERN_CACHE`): they depend on the rig alone, not on the scene, and the full
-//! rig takes seconds to image them, so a second experiment on the same rig reads them instead.
-//! A file holds its chain's whole key and is used only on an exact match; it is written
-//! atomically, so a reader never sees half of one.
+//! What depends on the rig alone, kept between runs (`--pattern-cache DIR` or
+//! `$SPECMUX_PATTERN_CACHE`): the imaged patterns s̃_k, one file per optical chain, and the
+//! simulated calibration captures, one file per rig and camera. Neither depends on the scene, and
+//! the full rig takes about a second for each, so a second experiment on the same rig reads them
+//! instead — as a lab captures its calibration once, not before every frame. A file holds its
+//! whole key and is used only on an exact match; it is written atomically, so a reader never sees
+//! half of one.
 
 use specmux_core::error::{Error, Result};
 use specmux_core::Cube;
@@ -14,7 +16,25 @@ pub const ENV: &str = "SPECMUX_PATTERN_CACHE";
 /// The first line of every cache file.
 const MAGIC: &[u8] = b"specmux pattern cache 1\n";
 
-/// A folder of cached pattern sets.
+/// What a cache file holds, told by its extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Entry {
+    /// The imaged patterns of an optical chain (`Chain::cache_key`).
+    Patterns,
+    /// The calibration captures of a rig and camera (`captures::cache_key`).
+    Captures,
+}
+
+impl Entry {
+    fn extension(self) -> &'static str {
+        match self {
+            Entry::Patterns => "patterns",
+            Entry::Captures => "captures",
+        }
+    }
+}
+
+/// A folder of cached pattern sets and calibration captures.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PatternCache {
     dir: PathBuf,
@@ -48,33 +68,32 @@ impl PatternCache {
         }
     }
 
-    /// The file of the chain whose key (`Chain::cache_key`) is `key`: its 64-bit FNV-1a hash in
-    /// hex.
-    pub fn path(&self, key: &str) -> PathBuf {
-        self.dir
-            .join(format!("{:016x}.patterns", fnv1a(key.as_bytes())))
+    /// The file of the `entry` whose key is `key`: its 64-bit FNV-1a hash in hex.
+    pub fn path(&self, entry: Entry, key: &str) -> PathBuf {
+        let hash = fnv1a(key.as_bytes());
+        self.dir.join(format!("{hash:016x}.{}", entry.extension()))
     }
 
-    /// The patterns kept under exactly `key`; None if there are none or the file holds another
-    /// chain (a hash collision). A damaged file is refused naming it.
-    pub fn load(&self, key: &str) -> Result<Option<Cube>> {
-        let path = self.path(key);
+    /// The cube kept under exactly `key`; None if there is none or the file holds another key (a
+    /// hash collision). A damaged file is refused naming it.
+    pub fn load(&self, entry: Entry, key: &str) -> Result<Option<Cube>> {
+        let path = self.path(entry, key);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
             Err(e) => return Err(Error::io(path, e)),
         };
-        decode(&bytes, key).map_err(|why| damaged(&path, &why))
+        decode(&bytes, key).map_err(|why| damaged(&path, why))
     }
 
-    /// Keep `patterns` under `key` (atomically: written beside the file, then renamed).
-    pub fn store(&self, key: &str, patterns: &Cube) -> Result<()> {
-        specmux_io::atomic::write_bytes(&self.path(key), &encode(key, patterns))
+    /// Keep `cube` under `key` (atomically: written beside the file, then renamed).
+    pub fn store(&self, entry: Entry, key: &str, cube: &Cube) -> Result<()> {
+        specmux_io::atomic::write_bytes(&self.path(entry, key), &encode(key, cube))
     }
 }
 
 /// The one-line refusal of a damaged cache file.
-fn damaged(path: &Path, why: &str) -> Error {
+pub(crate) fn damaged(path: &Path, why: impl std::fmt::Display) -> Error {
     Error::io(
         path,
         std::io::Error::new(
@@ -84,11 +103,17 @@ fn damaged(path: &Path, why: &str) -> Error {
     )
 }
 
-/// 64-bit FNV-1a: a stable hash for the file name (std's hasher may change between releases).
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
-    })
+/// 64-bit FNV-1a: a stable hash for file names and keys (std's hasher may change between
+/// releases).
+pub fn fnv1a(bytes: &[u8]) -> u64 {
+    fnv1a_from(0xcbf2_9ce4_8422_2325, bytes)
+}
+
+/// FNV-1a continued from `h` over `bytes`: a long input hashed piece by piece.
+pub fn fnv1a_from(h: u64, bytes: &[u8]) -> u64 {
+    bytes
+        .iter()
+        .fold(h, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
 }
 
 /// MAGIC, the key's length and bytes, width, height, planes (u64 LE), the values (f32 LE).
@@ -141,7 +166,7 @@ fn decode(bytes: &[u8], key: &str) -> std::result::Result<Option<Cube>, String> 
         .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
         .collect();
     if let Some(v) = data.iter().find(|v| !v.is_finite()) {
-        return Err(format!("a pattern value is {v}"));
+        return Err(format!("a value is {v}"));
     }
     Cube::from_vec(w, h, planes, data)
         .map(Some)

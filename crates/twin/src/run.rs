@@ -1,9 +1,10 @@
 //! Runs an experiment end to end — forward model, reconstruction, error against the truth — and
 //! gathers every figure with its wall time into one report.
 
-use crate::captures;
+use crate::captures::{self, CaptureConfig, KeptCaptures, WhiteTarget};
 use crate::experiment::Experiment;
 use crate::forward::{Pipeline, Simulated, StageTime};
+use crate::pattern_cache::PatternCache;
 use crate::rig::Rig;
 use crate::scene::Materials;
 use crate::sensor::Sensor;
@@ -210,26 +211,77 @@ pub fn reconstructor(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Rec
     Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)
 }
 
-/// The calibration frames the twin captures for this rig (`[calibration]`).
+/// The calibration frames the twin captures for this rig (`[calibration]`), read from the
+/// pattern cache (`$SPECMUX_PATTERN_CACHE`) when an earlier run left them there; the stages that
+/// ran are added to `times` (`captures::kept_calibration_frames`).
 pub fn calibration_frames(
     exp: &Experiment,
     rig: &Rig,
     sim: &Simulated,
+    times: &mut Vec<StageTime>,
 ) -> Result<CalibrationFrames> {
     let sensor = match &exp.rig.sensor {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?),
         None => None,
     };
-    let target = captures::WhiteTarget {
+    let target = WhiteTarget {
         patterns: &sim.patterns,
         exposed_white: &sim.exposed_white,
         full_scale: sim.full_scale,
     };
-    captures::calibration_frames(&exp.calibration, &target, sensor.as_ref())
+    let cache = PatternCache::from_env()?;
+    kept_calibration_frames(
+        &exp.calibration,
+        &target,
+        sensor.as_ref(),
+        cache.as_ref(),
+        times,
+    )
+}
+
+/// The calibration frames as `captures::calibration_frames` makes them, read from `cache` when
+/// an earlier run captured them on the same rig and camera (captures with a camera only: the
+/// rest cost milliseconds). Adds the captures' time to `times` as `calibration-captures` when they
+/// run, and the cache's lookup and write as `calibration-cache`.
+pub fn kept_calibration_frames(
+    cfg: &CaptureConfig,
+    target: &WhiteTarget,
+    sensor: Option<&Sensor>,
+    cache: Option<&PatternCache>,
+    times: &mut Vec<StageTime>,
+) -> Result<CalibrationFrames> {
+    let capture = |times: &mut Vec<StageTime>| {
+        let t = Instant::now();
+        let frames = captures::calibration_frames(cfg, target, sensor)?;
+        times.push(StageTime::since("calibration-captures", t));
+        Ok(frames)
+    };
+    let kept = cache.zip(sensor);
+    let Some(kept) = kept.and_then(|(c, cam)| KeptCaptures::new(c, cfg, target, cam)) else {
+        return capture(times);
+    };
+    let t = Instant::now();
+    let found = kept.load()?;
+    let mut seconds = t.elapsed().as_secs_f64();
+    let frames = match found {
+        Some(frames) => frames,
+        None => {
+            let frames = capture(times)?;
+            let t = Instant::now();
+            kept.store(&frames)?;
+            seconds += t.elapsed().as_secs_f64();
+            frames
+        }
+    };
+    times.push(StageTime {
+        stage: "calibration-cache".into(),
+        seconds,
+    });
+    Ok(frames)
 }
 
 /// The frames the rig's calibration captures (None for `[calibration] source = "oracle"`, which
-/// captures nothing), their time added to `times` as the stage `calibration-captures`.
+/// captures nothing), with their stages added to `times`.
 pub fn captured_calibration(
     exp: &Experiment,
     rig: &Rig,
@@ -239,15 +291,12 @@ pub fn captured_calibration(
     if exp.calibration.source != captures::CalibrationSource::Captures {
         return Ok(None);
     }
-    let t = Instant::now();
-    let frames = calibration_frames(exp, rig, sim)?;
-    times.push(StageTime::since("calibration-captures", t));
-    Ok(Some(frames))
+    calibration_frames(exp, rig, sim, times).map(Some)
 }
 
 /// The core's calibration from the frames the twin captures for this rig.
 pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
-    let frames = calibration_frames(exp, rig, sim)?;
+    let frames = calibration_frames(exp, rig, sim, &mut Vec::new())?;
     // A camera whose flat does not rise above its dark, a pattern with no carrier: name the
     // section that made the frames so.
     let key = if exp.rig.sensor.is_some() {

@@ -1,13 +1,17 @@
 //! The pattern cache through the forward pipeline: a second run of the same optical chain reads
 //! the patterns bit for bit and runs none of the optical stages; any change of the chain is a
-//! miss; a damaged file is refused naming it.
+//! miss; a damaged file is refused naming it. Likewise for the calibration captures it keeps.
 
+use specmux_core::calibration::CalibrationFrames;
 use specmux_core::spectral::Library;
+use specmux_twin::captures::WhiteTarget;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::{Pipeline, Simulated, StageTime};
 use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
+use specmux_twin::run::kept_calibration_frames;
 use specmux_twin::scene::Materials;
+use specmux_twin::sensor::Sensor;
 use std::path::PathBuf;
 
 const RIG: &str = "[rig.dmd]\nwidth = 48\nheight = 40\n[rig.fourier_filter]\n[rig.lens]\n";
@@ -157,4 +161,123 @@ fn a_folder_that_cannot_be_written_is_refused_before_any_stage_runs() {
         e.contains("/proc/self") && e.contains("cannot be written"),
         "{e}"
     );
+}
+
+/// The calibration captures of the 48 × 40 rig with a camera (seed `seed`, `frames` exposures
+/// averaged), kept in `cache` when given; with the names of the stages that ran.
+fn captures(
+    seed: u64,
+    frames: usize,
+    source: &str,
+    cache: Option<&Folder>,
+) -> (CalibrationFrames, Vec<String>) {
+    try_captures(seed, frames, source, cache).unwrap()
+}
+
+fn try_captures(
+    seed: u64,
+    frames: usize,
+    source: &str,
+    cache: Option<&Folder>,
+) -> specmux_core::Result<(CalibrationFrames, Vec<String>)> {
+    let toml = format!(
+        "[scene]\nsize = [48, 40]\n{RIG}[rig.sensor]\nseed = {seed}\n[calibration]\nframes = {frames}\nsource = \"{source}\"\n"
+    );
+    let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
+    let lib = Library::default_root();
+    let materials = Materials::load(&lib).unwrap();
+    let rig = Rig::build(&exp, &lib, &materials).unwrap();
+    let (sim, _) = Pipeline::build(&exp, &rig, &materials)
+        .unwrap()
+        .with_pattern_cache(None)
+        .run()
+        .unwrap();
+    let sensor = Sensor::new(exp.rig.sensor.as_ref().unwrap(), rig.width, rig.height).unwrap();
+    let target = WhiteTarget {
+        patterns: &sim.patterns,
+        exposed_white: &sim.exposed_white,
+        full_scale: sim.full_scale,
+    };
+    let cache = cache.map(|c| PatternCache::open(&c.0).unwrap());
+    let mut times = Vec::new();
+    let frames = kept_calibration_frames(
+        &exp.calibration,
+        &target,
+        Some(&sensor),
+        cache.as_ref(),
+        &mut times,
+    )?;
+    Ok((frames, times.into_iter().map(|t| t.stage).collect()))
+}
+
+/// Every value and label of two sets of calibration frames, bit for bit.
+fn same(a: &CalibrationFrames, b: &CalibrationFrames) -> bool {
+    let planes = |f: &CalibrationFrames| {
+        [&f.dark, &f.flat]
+            .map(|c| c.as_ref().map(|c| c.data.clone()))
+            .to_vec()
+    };
+    planes(a) == planes(b)
+        && a.patterns.data == b.patterns.data
+        && (a.patterns_linear, a.frames_averaged, &a.source)
+            == (b.patterns_linear, b.frames_averaged, &b.source)
+}
+
+#[test]
+fn a_second_run_reads_the_captures_bit_for_bit_and_captures_nothing() {
+    let dir = Folder::new("capture-cache-hit");
+    let (uncached, stages) = captures(5, 4, "captures", None);
+    assert_eq!(stages, ["calibration-captures"]);
+    let (first, stages) = captures(5, 4, "captures", Some(&dir));
+    assert_eq!(stages, ["calibration-captures", "calibration-cache"]);
+    let kept = files(&dir);
+    assert_eq!(kept.len(), 1);
+    assert_eq!(kept[0].extension().unwrap(), "captures");
+    let (second, stages) = captures(5, 4, "captures", Some(&dir));
+    assert_eq!(stages, ["calibration-cache"]);
+    assert!(same(&uncached, &first) && same(&first, &second));
+    assert!(uncached.dark.is_some() && uncached.flat.is_some() && !uncached.patterns_linear);
+}
+
+#[test]
+fn another_camera_seed_or_exposure_count_misses_and_keeps_a_file_of_its_own() {
+    let dir = Folder::new("capture-cache-miss");
+    let (a, _) = captures(5, 4, "captures", Some(&dir));
+    let (b, stages) = captures(6, 4, "captures", Some(&dir));
+    assert!(
+        stages.contains(&"calibration-captures".to_string()),
+        "{stages:?}"
+    );
+    assert_ne!(a.dark.unwrap().data, b.dark.unwrap().data);
+    let (c, stages) = captures(5, 2, "captures", Some(&dir));
+    assert!(
+        stages.contains(&"calibration-captures".to_string()),
+        "{stages:?}"
+    );
+    assert_eq!(c.frames_averaged, 2);
+    assert_eq!(files(&dir).len(), 3);
+}
+
+#[test]
+fn the_oracle_is_not_kept() {
+    let dir = Folder::new("capture-cache-oracle");
+    let (f, stages) = captures(5, 4, "oracle", Some(&dir));
+    assert_eq!(stages, ["calibration-captures"]);
+    assert!(f.patterns_linear);
+    assert!(files(&dir).is_empty());
+}
+
+#[test]
+fn a_damaged_capture_file_is_refused_naming_it() {
+    let dir = Folder::new("capture-cache-damaged");
+    captures(5, 4, "captures", Some(&dir));
+    let file = files(&dir).remove(0);
+    let bytes = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &bytes[..bytes.len() - 3]).unwrap();
+    let e = try_captures(5, 4, "captures", Some(&dir))
+        .expect_err("a damaged file is refused")
+        .to_string();
+    assert!(e.contains(&file.display().to_string()), "{e}");
+    assert!(e.contains("damaged pattern-cache file"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
 }
