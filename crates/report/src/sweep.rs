@@ -9,6 +9,7 @@ use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::spectral::Library;
 use specmux_twin::experiment::Experiment;
+use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::run;
 
 /// One swept key and its values (TOML literals).
@@ -117,8 +118,11 @@ pub struct SweepRow {
     pub refused: Option<String>,
 }
 
-/// Run `base` at every point of the grid.
+/// Run `base` at every point of the grid. The imaged patterns and calibration captures are kept
+/// from point to point (in `$SPECMUX_PATTERN_CACHE`, else in memory), so a point that leaves the
+/// rig as it was runs no optical stage and captures nothing again.
 pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<SweepRow>> {
+    let cache = PatternCache::from_env()?.unwrap_or_else(PatternCache::in_memory);
     let mut rows = Vec::new();
     let points = grid(vary);
     let bar = progress::bar("sweep");
@@ -127,7 +131,7 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
         let values: Vec<String> = point.iter().map(|(_, v)| v.to_string()).collect();
         bar.set_message(values.join(", "));
         let exp = with_values(base, point)?;
-        let row = match run::run(&exp, lib) {
+        let row = match run::run_in(&exp, lib, Some(&cache)) {
             Err(e @ Error::Interrupted(_)) => return Err(e),
             Ok((rep, _)) => {
                 let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));

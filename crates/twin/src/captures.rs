@@ -144,10 +144,10 @@ impl<'a> KeptCaptures<'a> {
         let Some(planes) = self.cache.load(Entry::Captures, &self.key)? else {
             return Ok(None);
         };
-        let path = || self.cache.path(Entry::Captures, &self.key);
+        let place = || self.cache.place(Entry::Captures, &self.key);
         from_planes(planes, self.patterns, self.frames)
             .map(Some)
-            .map_err(|why| pattern_cache::damaged(&path(), why))
+            .map_err(|why| pattern_cache::damaged(&place(), why))
     }
 
     /// Keep captured `frames` here (frames without a dark and a flat, made without a camera,

@@ -324,15 +324,15 @@ impl Stage for PatternCacheStage {
         "pattern-cache"
     }
     fn describe(&self) -> String {
-        let path = self.cache.path(Entry::Patterns, &self.key);
-        match path.exists() {
+        let place = self.cache.place(Entry::Patterns, &self.key);
+        match self.cache.holds(Entry::Patterns, &self.key) {
             true => format!(
                 "s̃_k read from {} (an earlier run of this chain left it there; the optical stages below do not run unless it holds another chain)",
-                path.display()
+                place.display()
             ),
             false => format!(
-                "no {} yet: the optical stages below run and s̃_k is kept there",
-                path.display()
+                "no s̃_k in {} yet: the optical stages below run and s̃_k is kept there",
+                place.display()
             ),
         }
     }

@@ -10,13 +10,14 @@ use specmux_core::error::{Error, Result};
 use specmux_core::Cube;
 use std::io::Read;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 /// The environment variable naming the cache's folder; unset or empty: no cache.
 pub const ENV: &str = "SPECMUX_PATTERN_CACHE";
 /// The first line of every cache file.
 const MAGIC: &[u8] = b"specmux pattern cache 1\n";
 
-/// What a cache file holds, told by its extension.
+/// What a cache entry holds (a file's extension tells it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Entry {
     /// The imaged patterns of an optical chain (`Chain::cache_key`).
@@ -34,10 +35,20 @@ impl Entry {
     }
 }
 
-/// A folder of cached pattern sets and calibration captures.
-#[derive(Clone, Debug, PartialEq)]
+/// A cache of pattern sets and calibration captures: a folder, or this process's memory.
+#[derive(Clone, Debug)]
 pub struct PatternCache {
-    dir: PathBuf,
+    store: Store,
+}
+
+/// Where a cache keeps its cubes.
+#[derive(Clone, Debug)]
+enum Store {
+    /// Files in a folder, kept across processes.
+    Folder(PathBuf),
+    /// The last cube of each entry, in memory shared by the clones: for the runs of one sweep,
+    /// whose rig seldom changes from point to point (one set is held, not one per point).
+    Memory(Arc<Mutex<Vec<(Entry, String, Cube)>>>),
 }
 
 impl PatternCache {
@@ -57,7 +68,16 @@ impl PatternCache {
         let probe = dir.join(format!(".probe{}", std::process::id()));
         std::fs::write(&probe, b"").map_err(|e| refuse("the folder cannot be written", e))?;
         let _ = std::fs::remove_file(&probe);
-        Ok(PatternCache { dir })
+        Ok(PatternCache {
+            store: Store::Folder(dir),
+        })
+    }
+
+    /// A cache in this process's memory that holds the last cube of each entry.
+    pub fn in_memory() -> PatternCache {
+        PatternCache {
+            store: Store::Memory(Arc::default()),
+        }
     }
 
     /// The cache `$SPECMUX_PATTERN_CACHE` names, or None when it is unset or empty.
@@ -68,16 +88,40 @@ impl PatternCache {
         }
     }
 
-    /// The file of the `entry` whose key is `key`: its 64-bit FNV-1a hash in hex.
-    pub fn path(&self, entry: Entry, key: &str) -> PathBuf {
-        let hash = fnv1a(key.as_bytes());
-        self.dir.join(format!("{hash:016x}.{}", entry.extension()))
+    /// Where the `entry` of `key` is kept: its file (named by the key's 64-bit FNV-1a hash in
+    /// hex), or the process's memory.
+    pub fn place(&self, entry: Entry, key: &str) -> PathBuf {
+        match &self.store {
+            Store::Folder(dir) => file(dir, entry, key),
+            Store::Memory(_) => PathBuf::from("(this process's memory)"),
+        }
+    }
+
+    /// Whether something is kept where `key` would be (another key's file, after a hash
+    /// collision, counts: `load` tells them apart).
+    pub fn holds(&self, entry: Entry, key: &str) -> bool {
+        match &self.store {
+            Store::Folder(dir) => file(dir, entry, key).exists(),
+            Store::Memory(m) => lock(m)
+                .iter()
+                .any(|(e, k, _)| (*e, k.as_str()) == (entry, key)),
+        }
     }
 
     /// The cube kept under exactly `key`; None if there is none or the file holds another key (a
     /// hash collision). A damaged file is refused naming it.
     pub fn load(&self, entry: Entry, key: &str) -> Result<Option<Cube>> {
-        let path = self.path(entry, key);
+        let dir = match &self.store {
+            Store::Folder(dir) => dir,
+            Store::Memory(m) => {
+                let kept = lock(m);
+                let found = kept
+                    .iter()
+                    .find(|(e, k, _)| (*e, k.as_str()) == (entry, key));
+                return Ok(found.map(|(_, _, cube)| cube.clone()));
+            }
+        };
+        let path = file(dir, entry, key);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
@@ -86,10 +130,33 @@ impl PatternCache {
         decode(&bytes, key).map_err(|why| damaged(&path, why))
     }
 
-    /// Keep `cube` under `key` (atomically: written beside the file, then renamed).
+    /// Keep `cube` under `key`: in a folder atomically (written beside the file, then renamed),
+    /// in memory in place of the entry's last cube.
     pub fn store(&self, entry: Entry, key: &str, cube: &Cube) -> Result<()> {
-        specmux_io::atomic::write_bytes(&self.path(entry, key), &encode(key, cube))
+        match &self.store {
+            Store::Folder(dir) => {
+                specmux_io::atomic::write_bytes(&file(dir, entry, key), &encode(key, cube))
+            }
+            Store::Memory(m) => {
+                let mut kept = lock(m);
+                kept.retain(|(e, _, _)| *e != entry);
+                kept.push((entry, key.to_string(), cube.clone()));
+                Ok(())
+            }
+        }
     }
+}
+
+/// The file of the `entry` of `key` in `dir`.
+fn file(dir: &Path, entry: Entry, key: &str) -> PathBuf {
+    let hash = fnv1a(key.as_bytes());
+    dir.join(format!("{hash:016x}.{}", entry.extension()))
+}
+
+/// The memory store's list; a panic elsewhere while it was held leaves it whole (a push or a
+/// retain), so a poisoned lock is taken as it is.
+fn lock(m: &Mutex<Vec<(Entry, String, Cube)>>) -> MutexGuard<'_, Vec<(Entry, String, Cube)>> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// The one-line refusal of a damaged cache file.
@@ -213,6 +280,31 @@ mod tests {
         let at = nan.len() - 4;
         nan[at..].copy_from_slice(&f32::NAN.to_le_bytes());
         assert!(decode(&nan, "k").unwrap_err().contains("NaN"));
+    }
+
+    #[test]
+    fn memory_holds_the_last_cube_of_each_entry_for_every_clone() {
+        let m = PatternCache::in_memory();
+        let shared = m.clone();
+        assert!(m.load(Entry::Patterns, "a").unwrap().is_none());
+        m.store(Entry::Patterns, "a", &cube()).unwrap();
+        m.store(Entry::Captures, "a", &Cube::zeros(2, 2, 1))
+            .unwrap();
+        assert!(shared.holds(Entry::Patterns, "a") && shared.holds(Entry::Captures, "a"));
+        assert_eq!(
+            shared.load(Entry::Patterns, "a").unwrap().unwrap().data,
+            cube().data
+        );
+        assert!(m.load(Entry::Patterns, "b").unwrap().is_none());
+        // A second key of an entry takes the first's place; the other entry stays.
+        m.store(Entry::Patterns, "b", &Cube::zeros(1, 1, 1))
+            .unwrap();
+        assert!(!m.holds(Entry::Patterns, "a") && m.holds(Entry::Patterns, "b"));
+        assert_eq!(m.load(Entry::Captures, "a").unwrap().unwrap().planes, 1);
+        assert_eq!(
+            m.place(Entry::Patterns, "b").to_str(),
+            Some("(this process's memory)")
+        );
     }
 
     #[test]

@@ -207,17 +207,28 @@ fn row(stage: &str, against: &str, m: &Metrics, seconds: f64) -> ResultRow {
 /// The reconstructor the core builds for this rig from its design and the calibration frames
 /// the twin captures (or the oracle, when `[calibration] source = "oracle"`).
 pub fn reconstructor(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Reconstructor> {
-    let cal = calibration(exp, rig, sim)?;
+    reconstructor_in(exp, rig, sim, PatternCache::from_env()?.as_ref())
+}
+
+/// [`reconstructor`] with the captures kept in `cache`.
+fn reconstructor_in(
+    exp: &Experiment,
+    rig: &Rig,
+    sim: &Simulated,
+    cache: Option<&PatternCache>,
+) -> Result<Reconstructor> {
+    let cal = calibration_in(exp, rig, sim, cache)?;
     Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)
 }
 
-/// The calibration frames the twin captures for this rig (`[calibration]`), read from the
-/// pattern cache (`$SPECMUX_PATTERN_CACHE`) when an earlier run left them there; the stages that
-/// ran are added to `times` (`captures::kept_calibration_frames`).
+/// The calibration frames the twin captures for this rig (`[calibration]`), read from `cache`
+/// when an earlier run left them there; the stages that ran are added to `times`
+/// ([`kept_calibration_frames`]).
 pub fn calibration_frames(
     exp: &Experiment,
     rig: &Rig,
     sim: &Simulated,
+    cache: Option<&PatternCache>,
     times: &mut Vec<StageTime>,
 ) -> Result<CalibrationFrames> {
     let sensor = match &exp.rig.sensor {
@@ -229,14 +240,7 @@ pub fn calibration_frames(
         exposed_white: &sim.exposed_white,
         full_scale: sim.full_scale,
     };
-    let cache = PatternCache::from_env()?;
-    kept_calibration_frames(
-        &exp.calibration,
-        &target,
-        sensor.as_ref(),
-        cache.as_ref(),
-        times,
-    )
+    kept_calibration_frames(&exp.calibration, &target, sensor.as_ref(), cache, times)
 }
 
 /// The calibration frames as `captures::calibration_frames` makes them, read from `cache` when
@@ -281,7 +285,7 @@ pub fn kept_calibration_frames(
 }
 
 /// The frames the rig's calibration captures (None for `[calibration] source = "oracle"`, which
-/// captures nothing), with their stages added to `times`.
+/// captures nothing), with their stages added to `times`; kept in `$SPECMUX_PATTERN_CACHE`.
 pub fn captured_calibration(
     exp: &Experiment,
     rig: &Rig,
@@ -291,12 +295,23 @@ pub fn captured_calibration(
     if exp.calibration.source != captures::CalibrationSource::Captures {
         return Ok(None);
     }
-    calibration_frames(exp, rig, sim, times).map(Some)
+    let cache = PatternCache::from_env()?;
+    calibration_frames(exp, rig, sim, cache.as_ref(), times).map(Some)
 }
 
 /// The core's calibration from the frames the twin captures for this rig.
 pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
-    let frames = calibration_frames(exp, rig, sim, &mut Vec::new())?;
+    calibration_in(exp, rig, sim, PatternCache::from_env()?.as_ref())
+}
+
+/// [`calibration`] with the captures kept in `cache`.
+fn calibration_in(
+    exp: &Experiment,
+    rig: &Rig,
+    sim: &Simulated,
+    cache: Option<&PatternCache>,
+) -> Result<Calibration> {
+    let frames = calibration_frames(exp, rig, sim, cache, &mut Vec::new())?;
     // A camera whose flat does not rise above its dark, a pattern with no carrier: name the
     // section that made the frames so.
     let key = if exp.rig.sensor.is_some() {
@@ -308,15 +323,25 @@ pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calib
         .map_err(|e| e.within(&exp.file, key, "the calibration frames it gives"))
 }
 
-/// Simulate the experiment's frame, reconstruct it and compare every stage with the truth.
+/// Simulate the experiment's frame, reconstruct it and compare every stage with the truth; the
+/// patterns and captures kept in `$SPECMUX_PATTERN_CACHE`.
 pub fn run(exp: &Experiment, lib: &Library) -> Result<(RunReport, RunData)> {
+    run_in(exp, lib, PatternCache::from_env()?.as_ref())
+}
+
+/// [`run`] with the patterns and captures kept in `cache` (None: none) instead.
+pub fn run_in(
+    exp: &Experiment,
+    lib: &Library,
+    cache: Option<&PatternCache>,
+) -> Result<(RunReport, RunData)> {
     let t_all = Instant::now();
     let materials = Materials::load(lib)?;
     let rig = Rig::build(exp, lib, &materials)?;
-    let pipeline = Pipeline::build(exp, &rig, &materials)?;
+    let pipeline = Pipeline::build(exp, &rig, &materials)?.with_pattern_cache(cache.cloned());
     let (sim, forward_stages) = pipeline.run()?;
     let t = Instant::now();
-    let recon = reconstructor(exp, &rig, &sim)?;
+    let recon = reconstructor_in(exp, &rig, &sim, cache)?;
     let t_setup = t.elapsed().as_secs_f64();
     let out = recon.run(&sim.frame, Some(&sim.exposed))?;
     let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;

@@ -9,7 +9,7 @@ use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::{Pipeline, Simulated, StageTime};
 use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
-use specmux_twin::run::kept_calibration_frames;
+use specmux_twin::run::{kept_calibration_frames, run_in};
 use specmux_twin::scene::Materials;
 use specmux_twin::sensor::Sensor;
 use std::path::PathBuf;
@@ -169,7 +169,7 @@ fn captures(
     seed: u64,
     frames: usize,
     source: &str,
-    cache: Option<&Folder>,
+    cache: Option<&PatternCache>,
 ) -> (CalibrationFrames, Vec<String>) {
     try_captures(seed, frames, source, cache).unwrap()
 }
@@ -178,7 +178,7 @@ fn try_captures(
     seed: u64,
     frames: usize,
     source: &str,
-    cache: Option<&Folder>,
+    cache: Option<&PatternCache>,
 ) -> specmux_core::Result<(CalibrationFrames, Vec<String>)> {
     let toml = format!(
         "[scene]\nsize = [48, 40]\n{RIG}[rig.sensor]\nseed = {seed}\n[calibration]\nframes = {frames}\nsource = \"{source}\"\n"
@@ -198,16 +198,14 @@ fn try_captures(
         exposed_white: &sim.exposed_white,
         full_scale: sim.full_scale,
     };
-    let cache = cache.map(|c| PatternCache::open(&c.0).unwrap());
     let mut times = Vec::new();
-    let frames = kept_calibration_frames(
-        &exp.calibration,
-        &target,
-        Some(&sensor),
-        cache.as_ref(),
-        &mut times,
-    )?;
+    let frames =
+        kept_calibration_frames(&exp.calibration, &target, Some(&sensor), cache, &mut times)?;
     Ok((frames, times.into_iter().map(|t| t.stage).collect()))
+}
+
+fn open(dir: &Folder) -> PatternCache {
+    PatternCache::open(&dir.0).unwrap()
 }
 
 /// Every value and label of two sets of calibration frames, bit for bit.
@@ -228,12 +226,12 @@ fn a_second_run_reads_the_captures_bit_for_bit_and_captures_nothing() {
     let dir = Folder::new("capture-cache-hit");
     let (uncached, stages) = captures(5, 4, "captures", None);
     assert_eq!(stages, ["calibration-captures"]);
-    let (first, stages) = captures(5, 4, "captures", Some(&dir));
+    let (first, stages) = captures(5, 4, "captures", Some(&open(&dir)));
     assert_eq!(stages, ["calibration-captures", "calibration-cache"]);
     let kept = files(&dir);
     assert_eq!(kept.len(), 1);
     assert_eq!(kept[0].extension().unwrap(), "captures");
-    let (second, stages) = captures(5, 4, "captures", Some(&dir));
+    let (second, stages) = captures(5, 4, "captures", Some(&open(&dir)));
     assert_eq!(stages, ["calibration-cache"]);
     assert!(same(&uncached, &first) && same(&first, &second));
     assert!(uncached.dark.is_some() && uncached.flat.is_some() && !uncached.patterns_linear);
@@ -242,14 +240,14 @@ fn a_second_run_reads_the_captures_bit_for_bit_and_captures_nothing() {
 #[test]
 fn another_camera_seed_or_exposure_count_misses_and_keeps_a_file_of_its_own() {
     let dir = Folder::new("capture-cache-miss");
-    let (a, _) = captures(5, 4, "captures", Some(&dir));
-    let (b, stages) = captures(6, 4, "captures", Some(&dir));
+    let (a, _) = captures(5, 4, "captures", Some(&open(&dir)));
+    let (b, stages) = captures(6, 4, "captures", Some(&open(&dir)));
     assert!(
         stages.contains(&"calibration-captures".to_string()),
         "{stages:?}"
     );
     assert_ne!(a.dark.unwrap().data, b.dark.unwrap().data);
-    let (c, stages) = captures(5, 2, "captures", Some(&dir));
+    let (c, stages) = captures(5, 2, "captures", Some(&open(&dir)));
     assert!(
         stages.contains(&"calibration-captures".to_string()),
         "{stages:?}"
@@ -261,7 +259,7 @@ fn another_camera_seed_or_exposure_count_misses_and_keeps_a_file_of_its_own() {
 #[test]
 fn the_oracle_is_not_kept() {
     let dir = Folder::new("capture-cache-oracle");
-    let (f, stages) = captures(5, 4, "oracle", Some(&dir));
+    let (f, stages) = captures(5, 4, "oracle", Some(&open(&dir)));
     assert_eq!(stages, ["calibration-captures"]);
     assert!(f.patterns_linear);
     assert!(files(&dir).is_empty());
@@ -270,14 +268,59 @@ fn the_oracle_is_not_kept() {
 #[test]
 fn a_damaged_capture_file_is_refused_naming_it() {
     let dir = Folder::new("capture-cache-damaged");
-    captures(5, 4, "captures", Some(&dir));
+    captures(5, 4, "captures", Some(&open(&dir)));
     let file = files(&dir).remove(0);
     let bytes = std::fs::read(&file).unwrap();
     std::fs::write(&file, &bytes[..bytes.len() - 3]).unwrap();
-    let e = try_captures(5, 4, "captures", Some(&dir))
+    let e = try_captures(5, 4, "captures", Some(&open(&dir)))
         .expect_err("a damaged file is refused")
         .to_string();
     assert!(e.contains(&file.display().to_string()), "{e}");
     assert!(e.contains("damaged pattern-cache file"), "{e}");
     assert_eq!(e.lines().count(), 1, "{e}");
+}
+
+#[test]
+fn runs_sharing_a_memory_cache_image_and_capture_once_with_the_same_results() {
+    let lib = Library::default_root();
+    let cache = PatternCache::in_memory();
+    let run = |seed: u64, cache: Option<&PatternCache>| {
+        let toml = format!(
+            "[scene]\nsize = [48, 40]\nseed = {seed}\n{RIG}[rig.sensor]\n[calibration]\nframes = 2\n"
+        );
+        let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
+        let (report, data) = run_in(&exp, &lib, cache).unwrap();
+        let stages: Vec<String> = report.forward_stages.into_iter().map(|t| t.stage).collect();
+        (stages, data.cube.data)
+    };
+    let (stages, first) = run(1, Some(&cache));
+    assert!(
+        stages.contains(&"relay-fourier-filter".to_string()),
+        "{stages:?}"
+    );
+    // Another scene on the same rig: no optical stage, and the cube of a run that images and
+    // captures afresh (so the kept captures are the right ones too).
+    let (stages, second) = run(2, Some(&cache));
+    assert!(
+        !stages.contains(&"relay-fourier-filter".to_string()),
+        "{stages:?}"
+    );
+    assert!(stages.contains(&"pattern-cache".to_string()), "{stages:?}");
+    let (_, uncached) = run(2, None);
+    assert_eq!(second, uncached);
+    assert_ne!(first, second, "the scenes differ");
+}
+
+#[test]
+fn a_memory_cache_reads_back_the_last_captures_of_the_rig() {
+    let cache = PatternCache::in_memory();
+    let (first, stages) = captures(5, 4, "captures", Some(&cache));
+    assert_eq!(stages, ["calibration-captures", "calibration-cache"]);
+    let (second, stages) = captures(5, 4, "captures", Some(&cache));
+    assert_eq!(stages, ["calibration-cache"]);
+    assert!(same(&first, &second));
+    // Another camera takes the place of the first: one set is held.
+    captures(6, 4, "captures", Some(&cache));
+    let (_, stages) = captures(5, 4, "captures", Some(&cache));
+    assert_eq!(stages, ["calibration-captures", "calibration-cache"]);
 }
