@@ -53,7 +53,7 @@ fn an_ideal_rig_gives_back_the_design_carriers() {
     for extra in ["", CAMERA] {
         let exp = experiment("dead-leaves", &format!("{PHASES}{extra}"));
         let (rig, sim) = simulate(&exp);
-        let cal = run::calibration(&exp, &rig, &sim).unwrap();
+        let cal = run::calibration(&exp, &rig, &sim, None).unwrap();
         let (df, dp) = errors(&cal.carriers, &rig.carriers);
         println!(
             "ideal rig{}: |Δf| ≤ {df:.2e} cycles/px, |Δφ| ≤ {dp:.2e} rad",
@@ -94,7 +94,7 @@ fn cube_psnr(exp: &Experiment, rig: &Rig, sim: &Simulated, cal: &Calibration) ->
 fn a_rotated_and_scaled_dmd_image_is_found_and_corrected() {
     let exp = experiment("shaded-objects", &format!("{PHASES}{CAMERA}{MISALIGNED}"));
     let (rig, sim) = simulate(&exp);
-    let cal = run::calibration(&exp, &rig, &sim).unwrap();
+    let cal = run::calibration(&exp, &rig, &sim, None).unwrap();
     let (df, dp) = errors(&cal.carriers, &rig.imaged_carriers);
     let (shift, _) = errors(&cal.carriers, &rig.carriers);
     println!("misaligned rig: carriers moved up to {shift:.2e} cycles/px, found to {df:.2e}, phase {dp:.2e} rad");
@@ -113,7 +113,7 @@ fn a_rotated_and_scaled_dmd_image_is_found_and_corrected() {
             &exp,
             &rig,
             &sim,
-            &run::calibration(&exp, &rig, &sim).unwrap(),
+            &run::calibration(&exp, &rig, &sim, None).unwrap(),
         )
     };
     println!("cube PSNR: aligned rig {aligned:.2} dB; misaligned, calibrated {calibrated:.2} dB, trusting the design {trusting:.2} dB");

@@ -47,6 +47,17 @@ def test_simulate_returns_the_calibration_frames(camera):
     assert specmux.simulate(oracle)["calibration"] is None
 
 
+def test_a_second_simulate_on_the_same_rig_reads_its_captures_back():
+    # The module keeps the last rig's captures (in memory without $SPECMUX_PATTERN_CACHE).
+    exp = experiment(sensor={"seed": 77})
+    first, second = specmux.simulate(exp), specmux.simulate(exp)
+    names = [[name for name, _ in s["stages"]] for s in (first, second)]
+    assert "calibration-captures" not in names[1] and "calibration-cache" in names[1], names
+    for key in ("dark", "flat", "patterns"):
+        np.testing.assert_array_equal(first["calibration"][key], second["calibration"][key])
+    np.testing.assert_array_equal(first["frame"], second["frame"])
+
+
 def test_calibration_arrays_round_trip_to_the_same_cube(camera):
     exp, sim = camera
     built_in = specmux.reconstruct(exp, sim["frame"], full=True)

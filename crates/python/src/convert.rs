@@ -1,6 +1,7 @@
 //! What crosses between Python and the library: numpy arrays as cubes and frames (float32,
 //! `(planes, height, width)`, the memory order of `specmux_core::Cube`), reports as Python
-//! dicts and lists (through their JSON form), the spectral library and the output folder.
+//! dicts and lists (through their JSON form), the spectral library, the output folder and the
+//! pattern cache the calls share.
 
 use crate::error::err;
 use numpy::ndarray::{Array2, Array3};
@@ -8,7 +9,9 @@ use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArrayDyn, PyUntypedArrayM
 use pyo3::prelude::*;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
+use specmux_twin::pattern_cache::PatternCache;
 use std::path::PathBuf;
+use std::sync::OnceLock;
 
 /// The spectral library: `spectra` if given, else `$SPECMUX_SPECTRA`, else the copy of
 /// `spectra/` embedded in the module.
@@ -175,5 +178,16 @@ impl Drop for OutDir {
         if self.temporary {
             let _ = std::fs::remove_dir_all(&self.path);
         }
+    }
+}
+
+/// The cache the module's calls share: `$SPECMUX_PATTERN_CACHE`'s folder, else the last rig's
+/// imaged patterns and calibration captures in this process's memory (about 33 MB for the full
+/// rig at 768²), so that a second call on the same rig images and captures nothing.
+pub(crate) fn kept() -> specmux_core::Result<PatternCache> {
+    static MEMORY: OnceLock<PatternCache> = OnceLock::new();
+    match PatternCache::from_env()? {
+        Some(folder) => Ok(folder),
+        None => Ok(MEMORY.get_or_init(PatternCache::in_memory).clone()),
     }
 }

@@ -2,7 +2,7 @@
 //! captures, as `specmux reconstruct`) and `metrics` (an estimate against its truth).
 
 use crate::calibration;
-use crate::convert::{cube_array, is_integer, library, to_cube, to_frame, to_py};
+use crate::convert::{cube_array, is_integer, kept, library, to_cube, to_frame, to_py};
 use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use pyo3::exceptions::PyUserWarning;
@@ -58,7 +58,8 @@ pub fn reconstruct<'py>(
             place: "reconstruct",
             key: "calibration",
         });
-        let cal = frame_calibration(&e, &rig, &materials, measured)?;
+        let cache = kept()?;
+        let cal = frame_calibration(&e, &rig, &materials, measured, Some(&cache))?;
         let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
         let snr = recon.frame_snr(&frame)?;
         Ok((recon.run(&frame, None)?, cal, snr, recon.warnings(snr)))

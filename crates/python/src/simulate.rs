@@ -2,12 +2,13 @@
 //! capture) and `run` (simulate, reconstruct and compare every stage: `specmux demo`).
 
 use crate::calibration;
-use crate::convert::{cube_array, frame_array, library, to_py};
+use crate::convert::{cube_array, frame_array, kept, library, to_py};
 use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use specmux_twin::forward::Pipeline;
+use specmux_twin::run as twin_run;
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
 use std::path::PathBuf;
@@ -34,8 +35,11 @@ pub fn simulate<'py>(
     let (sim, stages, frames) = interruptible(py, move || -> specmux_core::Result<_> {
         let materials = Materials::load(&lib)?;
         let rig = Rig::build(&e, &lib, &materials)?;
-        let (sim, mut stages) = Pipeline::build(&e, &rig, &materials)?.run()?;
-        let frames = specmux_twin::run::captured_calibration(&e, &rig, &sim, &mut stages)?;
+        let cache = kept()?;
+        let pipeline =
+            Pipeline::build(&e, &rig, &materials)?.with_pattern_cache(Some(cache.clone()));
+        let (sim, mut stages) = pipeline.run()?;
+        let frames = twin_run::captured_calibration(&e, &rig, &sim, Some(&cache), &mut stages)?;
         Ok((sim, stages, frames))
     })?
     .map_err(err)?;
@@ -71,7 +75,8 @@ pub fn run<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let e = exp.inner.clone();
     let lib = library(spectra);
-    let (rep, data) = interruptible(py, move || specmux_twin::run::run(&e, &lib))?.map_err(err)?;
+    let (rep, data) =
+        interruptible(py, move || twin_run::run_in(&e, &lib, Some(&kept()?)))?.map_err(err)?;
     let d = PyDict::new(py);
     d.set_item("report", to_py(py, &rep)?)?;
     d.set_item("table", rep.table())?;

@@ -24,6 +24,7 @@ use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
+use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
 use specmux_twin::run;
 use specmux_twin::scene::Materials;
@@ -48,7 +49,8 @@ pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Simulated> {
     let materials = Materials::load(lib)?;
     let rig = Rig::build(exp, lib, &materials)?;
     let (sim, _) = Pipeline::build(exp, &rig, &materials)?.run()?;
-    let calibration = run::calibration(exp, &rig, &sim)?;
+    let cache = PatternCache::from_env()?;
+    let calibration = run::calibration(exp, &rig, &sim, cache.as_ref())?;
     Ok(Simulated {
         exp: exp.clone(),
         truth: sim.scene.cube,

@@ -9,6 +9,7 @@ use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
 use specmux_twin::experiment::Experiment;
+use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
 use specmux_twin::run::{self, RunData, RunReport};
 use specmux_twin::scene::Materials;
@@ -597,7 +598,8 @@ pub fn simulate(
         return Ok(text);
     }
     let (sim, mut times) = pipeline.run()?;
-    let frames = run::captured_calibration(&exp, &rig, &sim, &mut times)?;
+    let cache = PatternCache::from_env()?;
+    let frames = run::captured_calibration(&exp, &rig, &sim, cache.as_ref(), &mut times)?;
     let t = std::time::Instant::now();
     let files = OutputSet::begin(out)?;
     write_cube(&files, "frame", &sim.frame, &["Y".to_string()], npy)?;
@@ -693,7 +695,8 @@ pub fn reconstruct(
             place,
             key: "--calibration",
         });
-    let cal = frame_calibration(&exp, &rig, &materials, measured)?;
+    let cache = PatternCache::from_env()?;
+    let cal = frame_calibration(&exp, &rig, &materials, measured, cache.as_ref())?;
     say!(text, "calibration: {}", cal.source);
     let device = crate::bench::Device::open(exp.compute.device, &exp.file)?;
     let design = rig.design();
@@ -807,20 +810,22 @@ pub struct Measured<'a> {
 }
 
 /// The calibration a frame is reconstructed with: the core's `Calibration::from_frames` on the
-/// `measured` frames, or without them the twin's simulated captures of the experiment's rig,
-/// its source saying so.
+/// `measured` frames, or without them the twin's simulated captures of the experiment's rig
+/// (patterns and captures kept in `cache`), its source saying so.
 pub fn frame_calibration(
     exp: &Experiment,
     rig: &Rig,
     materials: &Materials,
     measured: Option<Measured>,
+    cache: Option<&PatternCache>,
 ) -> Result<Calibration> {
     if let Some(m) = measured {
         return Calibration::from_frames(&rig.carriers, m.frames, exp.calibration.search_bins)
             .map_err(|e| e.within(m.place, m.key, "its frames"));
     }
-    let (sim, _) = specmux_twin::forward::Pipeline::build(exp, rig, materials)?.run()?;
-    let mut cal = run::calibration(exp, rig, &sim)?;
+    let pipeline = specmux_twin::forward::Pipeline::build(exp, rig, materials)?;
+    let (sim, _) = pipeline.with_pattern_cache(cache.cloned()).run()?;
+    let mut cal = run::calibration(exp, rig, &sim, cache)?;
     cal.source = format!(
         "the twin's simulated {} of the experiment's rig (no --calibration)",
         cal.source

@@ -217,7 +217,7 @@ fn reconstructor_in(
     sim: &Simulated,
     cache: Option<&PatternCache>,
 ) -> Result<Reconstructor> {
-    let cal = calibration_in(exp, rig, sim, cache)?;
+    let cal = calibration(exp, rig, sim, cache)?;
     Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)
 }
 
@@ -285,27 +285,22 @@ pub fn kept_calibration_frames(
 }
 
 /// The frames the rig's calibration captures (None for `[calibration] source = "oracle"`, which
-/// captures nothing), with their stages added to `times`; kept in `$SPECMUX_PATTERN_CACHE`.
+/// captures nothing), with their stages added to `times`; kept in `cache`.
 pub fn captured_calibration(
     exp: &Experiment,
     rig: &Rig,
     sim: &Simulated,
+    cache: Option<&PatternCache>,
     times: &mut Vec<StageTime>,
 ) -> Result<Option<CalibrationFrames>> {
     if exp.calibration.source != captures::CalibrationSource::Captures {
         return Ok(None);
     }
-    let cache = PatternCache::from_env()?;
-    calibration_frames(exp, rig, sim, cache.as_ref(), times).map(Some)
+    calibration_frames(exp, rig, sim, cache, times).map(Some)
 }
 
-/// The core's calibration from the frames the twin captures for this rig.
-pub fn calibration(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Calibration> {
-    calibration_in(exp, rig, sim, PatternCache::from_env()?.as_ref())
-}
-
-/// [`calibration`] with the captures kept in `cache`.
-fn calibration_in(
+/// The core's calibration from the frames the twin captures for this rig, kept in `cache`.
+pub fn calibration(
     exp: &Experiment,
     rig: &Rig,
     sim: &Simulated,
