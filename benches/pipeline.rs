@@ -34,7 +34,7 @@ fn bench(c: &mut Criterion) {
             .run()
             .unwrap();
         let frame = state.frame.clone();
-        let recon = run::reconstructor(&exp, &rig, &state).unwrap();
+        let recon = run::reconstructor(&exp, &rig, &state, None).unwrap();
         let xhat = recon.demultiplex(&frame).unwrap();
         let (_, stats) = recon.unmix(&xhat).unwrap();
         eprintln!("{name}: {stats:?}");

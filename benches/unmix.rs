@@ -20,7 +20,7 @@ fn bench(c: &mut Criterion) {
         .unwrap()
         .run()
         .unwrap();
-    let recon = run::reconstructor(&exp, &rig, &state).unwrap();
+    let recon = run::reconstructor(&exp, &rig, &state, None).unwrap();
     let channels = state.channels;
     let xhat = recon.demultiplex(&state.frame).unwrap();
     let truth = state.scene.cube;

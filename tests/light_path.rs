@@ -35,7 +35,7 @@ fn setup(exp: &Experiment) -> (Rig, Materials) {
 fn reconstructor(exp: &Experiment) -> specmux_core::Result<Reconstructor> {
     let (rig, m) = setup(exp);
     let (sim, _) = Pipeline::build(exp, &rig, &m)?.run()?;
-    run::reconstructor(exp, &rig, &sim)
+    run::reconstructor(exp, &rig, &sim, None)
 }
 
 fn delays(fraction: f64) -> String {

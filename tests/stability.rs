@@ -225,7 +225,10 @@ fn ideal_reconstructor() -> (specmux_core::reconstructor::Reconstructor, Cube) {
         .unwrap()
         .run()
         .unwrap();
-    (run::reconstructor(&exp, &rig, &sim).unwrap(), sim.frame)
+    (
+        run::reconstructor(&exp, &rig, &sim, None).unwrap(),
+        sim.frame,
+    )
 }
 
 #[test]

@@ -173,7 +173,7 @@ fn simulate(name: &str, toml: &str) -> (Cube, Reconstructor) {
         .unwrap()
         .run()
         .unwrap();
-    let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+    let recon = run::reconstructor(&exp, &rig, &sim, None).unwrap();
     (sim.frame, recon)
 }
 

@@ -40,7 +40,7 @@ fn simulated(toml: &str) -> (Simulated, Reconstructor) {
         .unwrap()
         .run()
         .unwrap();
-    let recon = run::reconstructor(&exp, &rig, &sim).unwrap();
+    let recon = run::reconstructor(&exp, &rig, &sim, None).unwrap();
     (sim, recon)
 }
 

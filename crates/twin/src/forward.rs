@@ -11,7 +11,7 @@ use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_summer_for;
-use crate::pattern_cache::{Entry, PatternCache};
+use crate::pattern_cache::{load_or_make, Entry, PatternCache};
 use crate::rig::Rig;
 use crate::scene;
 use crate::scene::Materials;
@@ -346,19 +346,11 @@ impl PatternCacheStage {
         times: &mut Vec<StageTime>,
         image: impl FnOnce(&mut Vec<StageTime>) -> Result<Cube>,
     ) -> Result<Cube> {
-        let t = Instant::now();
-        let cached = self.cache.load(Entry::Patterns, &self.key)?;
-        let mut seconds = t.elapsed().as_secs_f64();
-        let patterns = match cached {
-            Some(p) => p,
-            None => {
-                let p = image(times)?;
-                let t = Instant::now();
-                self.cache.store(Entry::Patterns, &self.key, &p)?;
-                seconds += t.elapsed().as_secs_f64();
-                p
-            }
-        };
+        let (patterns, seconds) = load_or_make(
+            || self.cache.load(Entry::Patterns, &self.key),
+            || image(times),
+            |p| self.cache.store(Entry::Patterns, &self.key, p),
+        )?;
         times.push(StageTime {
             stage: self.name().to_string(),
             seconds,

@@ -4,7 +4,7 @@
 use crate::captures::{self, CaptureConfig, KeptCaptures, WhiteTarget};
 use crate::experiment::Experiment;
 use crate::forward::{Pipeline, Simulated, StageTime};
-use crate::pattern_cache::PatternCache;
+use crate::pattern_cache::{load_or_make, PatternCache};
 use crate::rig::Rig;
 use crate::scene::Materials;
 use crate::sensor::Sensor;
@@ -205,13 +205,8 @@ fn row(stage: &str, against: &str, m: &Metrics, seconds: f64) -> ResultRow {
 }
 
 /// The reconstructor the core builds for this rig from its design and the calibration frames
-/// the twin captures (or the oracle, when `[calibration] source = "oracle"`).
-pub fn reconstructor(exp: &Experiment, rig: &Rig, sim: &Simulated) -> Result<Reconstructor> {
-    reconstructor_in(exp, rig, sim, PatternCache::from_env()?.as_ref())
-}
-
-/// [`reconstructor`] with the captures kept in `cache`.
-fn reconstructor_in(
+/// the twin captures (or the oracle, when `[calibration] source = "oracle"`), kept in `cache`.
+pub fn reconstructor(
     exp: &Experiment,
     rig: &Rig,
     sim: &Simulated,
@@ -264,19 +259,7 @@ pub fn kept_calibration_frames(
     let Some(kept) = kept.and_then(|(c, cam)| KeptCaptures::new(c, cfg, target, cam)) else {
         return capture(times);
     };
-    let t = Instant::now();
-    let found = kept.load()?;
-    let mut seconds = t.elapsed().as_secs_f64();
-    let frames = match found {
-        Some(frames) => frames,
-        None => {
-            let frames = capture(times)?;
-            let t = Instant::now();
-            kept.store(&frames)?;
-            seconds += t.elapsed().as_secs_f64();
-            frames
-        }
-    };
+    let (frames, seconds) = load_or_make(|| kept.load(), || capture(times), |f| kept.store(f))?;
     times.push(StageTime {
         stage: "calibration-cache".into(),
         seconds,
@@ -336,7 +319,7 @@ pub fn run_in(
     let pipeline = Pipeline::build(exp, &rig, &materials)?.with_pattern_cache(cache.cloned());
     let (sim, forward_stages) = pipeline.run()?;
     let t = Instant::now();
-    let recon = reconstructor_in(exp, &rig, &sim, cache)?;
+    let recon = reconstructor(exp, &rig, &sim, cache)?;
     let t_setup = t.elapsed().as_secs_f64();
     let out = recon.run(&sim.frame, Some(&sim.exposed))?;
     let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;

@@ -124,14 +124,21 @@ fn a_damaged_file_is_refused_naming_it() {
     let dir = Folder::new("pattern-cache-damaged");
     let p = pipeline(RIG, 1, &dir);
     run(&p);
-    let file = files(&dir).remove(0);
+    let file = cut_short(&dir, 7);
+    let e = p.run().err().expect("a damaged file is refused");
+    refuses_naming(&e.to_string(), &file);
+}
+
+/// The folder's one file, its last `n` bytes cut off.
+fn cut_short(dir: &Folder, n: usize) -> PathBuf {
+    let file = files(dir).remove(0);
     let bytes = std::fs::read(&file).unwrap();
-    std::fs::write(&file, &bytes[..bytes.len() - 7]).unwrap();
-    let e = p
-        .run()
-        .err()
-        .expect("a damaged file is refused")
-        .to_string();
+    std::fs::write(&file, &bytes[..bytes.len() - n]).unwrap();
+    file
+}
+
+/// `e` is one line that names `file` as a damaged cache file.
+fn refuses_naming(e: &str, file: &std::path::Path) {
     assert!(e.contains(&file.display().to_string()), "{e}");
     assert!(e.contains("damaged pattern-cache file"), "{e}");
     assert_eq!(e.lines().count(), 1, "{e}");
@@ -269,15 +276,9 @@ fn the_oracle_is_not_kept() {
 fn a_damaged_capture_file_is_refused_naming_it() {
     let dir = Folder::new("capture-cache-damaged");
     captures(5, 4, "captures", Some(&open(&dir)));
-    let file = files(&dir).remove(0);
-    let bytes = std::fs::read(&file).unwrap();
-    std::fs::write(&file, &bytes[..bytes.len() - 3]).unwrap();
-    let e = try_captures(5, 4, "captures", Some(&open(&dir)))
-        .expect_err("a damaged file is refused")
-        .to_string();
-    assert!(e.contains(&file.display().to_string()), "{e}");
-    assert!(e.contains("damaged pattern-cache file"), "{e}");
-    assert_eq!(e.lines().count(), 1, "{e}");
+    let file = cut_short(&dir, 3);
+    let e = try_captures(5, 4, "captures", Some(&open(&dir))).expect_err("a damaged file");
+    refuses_naming(&e.to_string(), &file);
 }
 
 #[test]
