@@ -205,8 +205,15 @@ pub fn demo(
     let exp = experiment_for(scene, size)?;
     let (rep, data) = run::run(&exp, lib)?;
     say!(text, "{}", rep.table());
+    let t = std::time::Instant::now();
     let files = OutputSet::begin(out)?;
     write_run_files(&exp, &rep, &data, &files, npy, lib)?;
+    // After the report: its own writing is not in it.
+    say!(
+        text,
+        "files (EXR, figures, report) written in {:.2}s",
+        t.elapsed().as_secs_f64()
+    );
     finish(files, out, &mut text)?;
     Ok(text)
 }

@@ -393,13 +393,11 @@ pub fn pixel_rmse(truth: &Cube, est: &Cube) -> Result<Vec<f32>> {
         .collect())
 }
 
-/// What the comparison panel shows: the cubes, their colour rendering and the marked pixels.
+/// What the comparison panel shows: the cubes, their sRGB previews (`Colorimetry::preview`) and
+/// the marked pixels.
 pub struct Comparison<'a> {
-    pub truth: Option<&'a Cube>,
-    pub est: &'a Cube,
-    pub colorimetry: &'a Colorimetry,
-    /// Scales Y before the tone curve (see `Colorimetry::preview`).
-    pub exposure: f64,
+    pub truth: Option<(&'a Cube, &'a image::RgbImage)>,
+    pub est: (&'a Cube, &'a image::RgbImage),
     /// How the colours were made, e.g. "reflectance under illuminants/D65".
     pub lighting: String,
     /// The cube's quantity and unit, e.g. "reflectance" or "radiance, scene units".
@@ -410,8 +408,8 @@ pub struct Comparison<'a> {
 /// Truth, reconstruction and the per-pixel spectral RMSE side by side, the marked pixels
 /// numbered on each; without a truth, the reconstruction alone, saying so.
 pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
-    let est_rgb = c.colorimetry.preview(c.est, c.exposure)?;
-    let (w, h) = (c.est.width, c.est.height);
+    let (est, est_rgb) = c.est;
+    let (w, h) = (est.width, est.height);
     let axes = Axes::pixels(w, h, "pixels");
     let marks: Vec<(f64, f64)> = c
         .pixels
@@ -429,11 +427,11 @@ pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
         return render_png(path, (pw.max(640), ch), |root| {
             let root = root.titled(&heading, ("sans-serif", 12)).map_err(show)?;
             let t = "reconstruction (no truth given: no error map)";
-            draw_image(&root, t, &resampled(&est_rgb), &axes, &marks).map(|_| ())
+            draw_image(&root, t, &resampled(est_rgb), &axes, &marks).map(|_| ())
         });
     };
-    let truth_rgb = c.colorimetry.preview(truth, c.exposure)?;
-    let err = pixel_rmse(truth, c.est)?;
+    let (truth, truth_rgb) = truth;
+    let err = pixel_rmse(truth, est)?;
     let field = Field {
         values: &err,
         width: w,
@@ -449,8 +447,8 @@ pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
             .map_err(show)?;
         let (a, rest) = root.split_horizontally(pw);
         let (b, e) = rest.split_horizontally(pw);
-        draw_image(&a, "truth", &resampled(&truth_rgb), &axes, &marks)?;
-        draw_image(&b, "reconstruction", &resampled(&est_rgb), &axes, &marks)?;
+        draw_image(&a, "truth", &resampled(truth_rgb), &axes, &marks)?;
+        draw_image(&b, "reconstruction", &resampled(est_rgb), &axes, &marks)?;
         draw_field(&e, "per-pixel error: RMS over bands", &field, &axes, &marks)
     })
 }
@@ -488,25 +486,35 @@ pub fn write_figures(
     } else {
         1.0 / f64::from(reference.max().max(f32::MIN_POSITIVE))
     };
-    for (name, cube) in [("truth_rgb.png", truth), ("cube_rgb.png", Some(est))] {
-        if let Some(cube) = cube {
-            let img = image::DynamicImage::ImageRgb8(col.preview(cube, exposure)?);
-            specmux_io::png::write_png(&files.path(name), img)?;
+    let truth_rgb = truth.map(|t| col.preview(t, exposure)).transpose()?;
+    let est_rgb = col.preview(est, exposure)?;
+    let previews = || -> Result<()> {
+        for (name, img) in [
+            ("truth_rgb.png", truth_rgb.as_ref()),
+            ("cube_rgb.png", Some(&est_rgb)),
+        ] {
+            if let Some(img) = img {
+                let img = image::DynamicImage::ImageRgb8(img.clone());
+                specmux_io::png::write_png(&files.path(name), img)?;
+            }
         }
-    }
+        Ok(())
+    };
     let pixels = crate::plot::distinct_pixels(reference, 4);
     let panel = Comparison {
-        truth,
-        est,
-        colorimetry: &col,
-        exposure,
+        truth: truth.zip(truth_rgb.as_ref()),
+        est: (est, &est_rgb),
         lighting,
         unit: unit.into(),
         pixels: &pixels,
     };
-    comparison_png(&files.path("comparison.png"), &panel)?;
-    let spectra = files.path("spectra.png");
-    crate::plot::spectra_plot(&spectra, &grid, (truth, est), &pixels, y_label)
+    // Each PNG's deflate runs on one thread: the previews beside the panel and the plot.
+    let (written, plotted) = rayon::join(previews, || {
+        comparison_png(&files.path("comparison.png"), &panel)?;
+        let spectra = files.path("spectra.png");
+        crate::plot::spectra_plot(&spectra, &grid, (truth, est), &pixels, y_label)
+    });
+    written.and(plotted)
 }
 
 /// One channel's pattern figure: the pattern on the DMD (mirrors) and on the sensor (pixels),

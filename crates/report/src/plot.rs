@@ -2,6 +2,7 @@
 
 use plotters::element::MultiLineText;
 use plotters::prelude::*;
+use rayon::prelude::*;
 use specmux_core::spectral::{Curve, Grid, Library};
 use specmux_core::{Cube, Error, Result};
 use specmux_io::png::write_png;
@@ -69,12 +70,18 @@ impl Colorimetry {
             )));
         }
         let n = cube.pixels();
-        let mut img = image::RgbImage::new(cube.width as u32, cube.height as u32);
-        for (p, px) in img.pixels_mut().enumerate() {
-            let c = self.xyz((0..cube.planes).map(|b| cube.data[b * n + p] as f64));
-            *px = image::Rgb(xyz_to_srgb(c.map(|v| v * exposure)));
-        }
-        Ok(img)
+        let mut rgb = vec![0u8; 3 * n];
+        rgb.par_chunks_mut(3 * cube.width)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, px) in row.chunks_exact_mut(3).enumerate() {
+                    let p = y * cube.width + x;
+                    let c = self.xyz((0..cube.planes).map(|b| cube.data[b * n + p] as f64));
+                    px.copy_from_slice(&xyz_to_srgb(c.map(|v| v * exposure)));
+                }
+            });
+        image::RgbImage::from_raw(cube.width as u32, cube.height as u32, rgb)
+            .ok_or_else(|| Error::Shape(format!("{}×{} preview", cube.width, cube.height)))
     }
 }
 
@@ -511,6 +518,27 @@ mod tests {
         let mut cube = Cube::zeros(1, 1, grid.count);
         cube.data = grid.wavelengths().into_iter().map(reflectance).collect();
         col.preview(&cube, 1.0).unwrap().get_pixel(0, 0).0
+    }
+
+    #[test]
+    fn each_preview_pixel_is_the_colour_of_its_own_spectrum() {
+        // 3 × 2 pixels, each a flat reflectance of its own level: rows and columns in place.
+        let level = |p: usize| 0.1 + 0.15 * p as f32;
+        let lib = library();
+        let grid = Grid::new(400.0, 10.0, 31).unwrap();
+        let d65 = lib.curve("illuminants/D65").unwrap();
+        let col = Colorimetry::new(&lib, &grid, Some(&d65)).unwrap();
+        let mut cube = Cube::zeros(3, 2, grid.count);
+        for b in 0..grid.count {
+            for p in 0..6 {
+                cube.data[b * 6 + p] = level(p);
+            }
+        }
+        let img = col.preview(&cube, 1.0).unwrap();
+        for p in 0..6 {
+            let got = img.get_pixel((p % 3) as u32, (p / 3) as u32).0;
+            assert_eq!(got, colour_of(|_| level(p)), "pixel {p}");
+        }
     }
 
     #[test]
