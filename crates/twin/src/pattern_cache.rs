@@ -48,9 +48,18 @@ enum Store {
     /// Files in a folder, kept across processes.
     Folder(PathBuf),
     /// The last cube of each entry, in memory shared by the clones: for the runs of one sweep,
-    /// whose rig seldom changes from point to point (one set is held, not one per point).
-    Memory(Arc<Mutex<Vec<(Entry, String, Cube)>>>),
+    /// whose rig seldom changes from point to point (one set is held, not one per point). A cube
+    /// of more than `limit` bytes is not kept.
+    Memory {
+        kept: Arc<Mutex<Vec<(Entry, String, Cube)>>>,
+        limit: usize,
+    },
 }
+
+/// The largest cube the memory store keeps, in bytes: 256 MiB, the patterns of the full rig at
+/// 2 048² are 100 MB, its captures 134 MB; a larger frame's sets are made again rather than
+/// doubling the memory a run needs.
+pub const MEMORY_LIMIT_BYTES: usize = 256 << 20;
 
 impl PatternCache {
     /// The cache in `dir`, created if absent; a folder that cannot be made or written is refused
@@ -74,10 +83,18 @@ impl PatternCache {
         })
     }
 
-    /// A cache in this process's memory that holds the last cube of each entry.
+    /// A cache in this process's memory that holds the last cube of each entry, up to
+    /// [`MEMORY_LIMIT_BYTES`] each.
     pub fn in_memory() -> PatternCache {
+        PatternCache::in_memory_up_to(MEMORY_LIMIT_BYTES)
+    }
+
+    fn in_memory_up_to(limit: usize) -> PatternCache {
         PatternCache {
-            store: Store::Memory(Arc::default()),
+            store: Store::Memory {
+                kept: Arc::default(),
+                limit,
+            },
         }
     }
 
@@ -94,7 +111,7 @@ impl PatternCache {
     pub fn place(&self, entry: Entry, key: &str) -> PathBuf {
         match &self.store {
             Store::Folder(dir) => file(dir, entry, key),
-            Store::Memory(_) => PathBuf::from("(this process's memory)"),
+            Store::Memory { .. } => PathBuf::from("(this process's memory)"),
         }
     }
 
@@ -103,7 +120,7 @@ impl PatternCache {
     pub fn holds(&self, entry: Entry, key: &str) -> bool {
         match &self.store {
             Store::Folder(dir) => file(dir, entry, key).exists(),
-            Store::Memory(m) => lock(m)
+            Store::Memory { kept, .. } => lock(kept)
                 .iter()
                 .any(|(e, k, _)| (*e, k.as_str()) == (entry, key)),
         }
@@ -114,8 +131,8 @@ impl PatternCache {
     pub fn load(&self, entry: Entry, key: &str) -> Result<Option<Cube>> {
         let dir = match &self.store {
             Store::Folder(dir) => dir,
-            Store::Memory(m) => {
-                let kept = lock(m);
+            Store::Memory { kept, .. } => {
+                let kept = lock(kept);
                 let found = kept
                     .iter()
                     .find(|(e, k, _)| (*e, k.as_str()) == (entry, key));
@@ -138,10 +155,12 @@ impl PatternCache {
             Store::Folder(dir) => {
                 specmux_io::atomic::write_bytes(&file(dir, entry, key), &encode(key, cube))
             }
-            Store::Memory(m) => {
-                let mut kept = lock(m);
+            Store::Memory { kept, limit } => {
+                let mut kept = lock(kept);
                 kept.retain(|(e, _, _)| *e != entry);
-                kept.push((entry, key.to_string(), cube.clone()));
+                if 4 * cube.data.len() <= *limit {
+                    kept.push((entry, key.to_string(), cube.clone()));
+                }
                 Ok(())
             }
         }
@@ -329,6 +348,17 @@ mod tests {
             m.place(Entry::Patterns, "b").to_str(),
             Some("(this process's memory)")
         );
+    }
+
+    #[test]
+    fn memory_keeps_no_cube_over_its_limit_and_drops_the_entry_it_replaces() {
+        let m = PatternCache::in_memory_up_to(4 * 24);
+        m.store(Entry::Patterns, "a", &cube()).unwrap();
+        assert!(m.holds(Entry::Patterns, "a"), "24 values fit 96 bytes");
+        m.store(Entry::Patterns, "b", &Cube::zeros(5, 5, 1))
+            .unwrap();
+        assert!(!m.holds(Entry::Patterns, "b") && !m.holds(Entry::Patterns, "a"));
+        assert!(m.load(Entry::Patterns, "b").unwrap().is_none());
     }
 
     #[test]
