@@ -168,9 +168,7 @@ impl<'a> KeptCaptures<'a> {
 /// bits, which the key names; the patterns themselves would double the file).
 fn cache_key(cfg: &CaptureConfig, sim: &WhiteTarget, cam: &Sensor) -> String {
     let p = sim.patterns;
-    let bits = (p.data.iter()).fold(pattern_cache::fnv1a(b""), |h, v| {
-        pattern_cache::fnv1a_from(h, &v.to_bits().to_le_bytes())
-    });
+    let bits = pattern_cache::fnv1a_f32(&p.data);
     format!(
         "specmux {} calibration captures model {MODEL}\nexposures averaged {}\ncamera {}x{} {:?}\nexposed white {:?}, full scale {:?}\npatterns {}x{}x{}, FNV-1a of their bits {bits:016x}",
         env!("CARGO_PKG_VERSION"),
@@ -270,7 +268,7 @@ fn scaled(c: &Cube, k: f64) -> Cube {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pattern_cache::fnv1a_from;
+    use crate::pattern_cache::fnv1a_f32;
     use crate::sensor::SensorConfig;
 
     /// Three 16 × 12 patterns of values in [0.1, 0.9].
@@ -294,11 +292,7 @@ mod tests {
             full_scale: 1.25,
         };
         let f = calibration_frames(&CaptureConfig::default(), &target, Some(&cam)).unwrap();
-        let sum = |c: &Cube| {
-            (c.data.iter()).fold(0xcbf2_9ce4_8422_2325, |h, v| {
-                fnv1a_from(h, &v.to_bits().to_le_bytes())
-            })
-        };
+        let sum = |c: &Cube| fnv1a_f32(&c.data);
         let got = [
             f.dark.as_ref().unwrap(),
             f.flat.as_ref().unwrap(),

@@ -120,9 +120,7 @@ impl PatternCache {
     pub fn holds(&self, entry: Entry, key: &str) -> bool {
         match &self.store {
             Store::Folder(dir) => file(dir, entry, key).exists(),
-            Store::Memory { kept, .. } => lock(kept)
-                .iter()
-                .any(|(e, k, _)| (*e, k.as_str()) == (entry, key)),
+            Store::Memory { kept, .. } => find(&lock(kept), entry, key).is_some(),
         }
     }
 
@@ -131,13 +129,7 @@ impl PatternCache {
     pub fn load(&self, entry: Entry, key: &str) -> Result<Option<Cube>> {
         let dir = match &self.store {
             Store::Folder(dir) => dir,
-            Store::Memory { kept, .. } => {
-                let kept = lock(kept);
-                let found = kept
-                    .iter()
-                    .find(|(e, k, _)| (*e, k.as_str()) == (entry, key));
-                return Ok(found.map(|(_, _, cube)| cube.clone()));
-            }
+            Store::Memory { kept, .. } => return Ok(find(&lock(kept), entry, key).cloned()),
         };
         let path = file(dir, entry, key);
         let bytes = match std::fs::read(&path) {
@@ -196,6 +188,12 @@ fn file(dir: &Path, entry: Entry, key: &str) -> PathBuf {
     dir.join(format!("{hash:016x}.{}", entry.extension()))
 }
 
+/// The cube the memory store keeps for `entry` under exactly `key`.
+fn find<'a>(kept: &'a [(Entry, String, Cube)], entry: Entry, key: &str) -> Option<&'a Cube> {
+    let entry_of = |(e, k, _): &&(Entry, String, Cube)| (*e, k.as_str()) == (entry, key);
+    kept.iter().find(entry_of).map(|(_, _, cube)| cube)
+}
+
 /// The memory store's list; a panic elsewhere while it was held leaves it whole (a push or a
 /// retain), so a poisoned lock is taken as it is.
 fn lock(m: &Mutex<Vec<(Entry, String, Cube)>>) -> MutexGuard<'_, Vec<(Entry, String, Cube)>> {
@@ -219,8 +217,14 @@ pub fn fnv1a(bytes: &[u8]) -> u64 {
     fnv1a_from(0xcbf2_9ce4_8422_2325, bytes)
 }
 
+/// FNV-1a of the bits of `values` (little-endian): equal iff every value is bit-identical (up to
+/// collisions).
+pub fn fnv1a_f32(values: &[f32]) -> u64 {
+    (values.iter()).fold(fnv1a(b""), |h, v| fnv1a_from(h, &v.to_bits().to_le_bytes()))
+}
+
 /// FNV-1a continued from `h` over `bytes`: a long input hashed piece by piece.
-pub fn fnv1a_from(h: u64, bytes: &[u8]) -> u64 {
+fn fnv1a_from(h: u64, bytes: &[u8]) -> u64 {
     bytes
         .iter()
         .fold(h, |h, &b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3))
