@@ -11,7 +11,7 @@ use crate::optics::imaging;
 use crate::optics::imaging::{Chain, Display, ImageSpectrum, IntensitySpectrum};
 use crate::optics::psf::LensConfig;
 use crate::optics::relay::pair_summer_for;
-use crate::pattern_cache::{load_or_make, Entry, PatternCache};
+use crate::pattern_cache::{Entry, PatternCache};
 use crate::rig::Rig;
 use crate::scene;
 use crate::scene::Materials;
@@ -73,6 +73,33 @@ impl StageTime {
             seconds: start.elapsed().as_secs_f64(),
         }
     }
+}
+
+/// What `load` finds in a cache, else what `make` makes (its own stages added to `times`), then
+/// `store`d; the lookup and the write timed as `stage`, after `make`'s.
+pub fn kept_or_made<T>(
+    times: &mut Vec<StageTime>,
+    stage: &str,
+    load: impl FnOnce() -> Result<Option<T>>,
+    make: impl FnOnce(&mut Vec<StageTime>) -> Result<T>,
+    store: impl FnOnce(&T) -> Result<()>,
+) -> Result<T> {
+    let t = Instant::now();
+    let found = load()?;
+    let mut seconds = t.elapsed().as_secs_f64();
+    let value = match found {
+        Some(v) => v,
+        None => {
+            let v = make(times)?;
+            let t = Instant::now();
+            store(&v)?;
+            seconds += t.elapsed().as_secs_f64();
+            v
+        }
+    };
+    let stage = stage.to_string();
+    times.push(StageTime { stage, seconds });
+    Ok(value)
 }
 
 /// x_i: the scene seen through each wheel filter, and white's value in each.
@@ -346,16 +373,13 @@ impl PatternCacheStage {
         times: &mut Vec<StageTime>,
         image: impl FnOnce(&mut Vec<StageTime>) -> Result<Cube>,
     ) -> Result<Cube> {
-        let (patterns, seconds) = load_or_make(
+        kept_or_made(
+            times,
+            self.name(),
             || self.cache.load(Entry::Patterns, &self.key),
-            || image(times),
+            image,
             |p| self.cache.store(Entry::Patterns, &self.key, p),
-        )?;
-        times.push(StageTime {
-            stage: self.name().to_string(),
-            seconds,
-        });
-        Ok(patterns)
+        )
     }
 }
 

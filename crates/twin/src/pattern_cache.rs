@@ -11,7 +11,6 @@ use specmux_core::Cube;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Instant;
 
 /// The environment variable naming the cache's folder; unset or empty: no cache.
 pub const ENV: &str = "SPECMUX_PATTERN_CACHE";
@@ -157,29 +156,6 @@ impl PatternCache {
             }
         }
     }
-}
-
-/// What `load` finds, else what `make` makes, then `store`d; with the seconds the lookup and the
-/// write took (the cache's own time, apart from `make`'s).
-pub fn load_or_make<T>(
-    load: impl FnOnce() -> Result<Option<T>>,
-    make: impl FnOnce() -> Result<T>,
-    store: impl FnOnce(&T) -> Result<()>,
-) -> Result<(T, f64)> {
-    let t = Instant::now();
-    let found = load()?;
-    let mut seconds = t.elapsed().as_secs_f64();
-    let value = match found {
-        Some(v) => v,
-        None => {
-            let v = make()?;
-            let t = Instant::now();
-            store(&v)?;
-            seconds += t.elapsed().as_secs_f64();
-            v
-        }
-    };
-    Ok((value, seconds))
 }
 
 /// The file of the `entry` of `key` in `dir`.

@@ -3,8 +3,8 @@
 
 use crate::captures::{self, CaptureConfig, KeptCaptures, WhiteTarget};
 use crate::experiment::Experiment;
-use crate::forward::{Pipeline, Simulated, StageTime};
-use crate::pattern_cache::{load_or_make, PatternCache};
+use crate::forward::{kept_or_made, Pipeline, Simulated, StageTime};
+use crate::pattern_cache::PatternCache;
 use crate::rig::Rig;
 use crate::scene::Materials;
 use crate::sensor::Sensor;
@@ -259,12 +259,8 @@ pub fn kept_calibration_frames(
     let Some(kept) = kept.and_then(|(c, cam)| KeptCaptures::new(c, cfg, target, cam)) else {
         return capture(times);
     };
-    let (frames, seconds) = load_or_make(|| kept.load(), || capture(times), |f| kept.store(f))?;
-    times.push(StageTime {
-        stage: "calibration-cache".into(),
-        seconds,
-    });
-    Ok(frames)
+    let load = || kept.load();
+    kept_or_made(times, "calibration-cache", load, capture, |f| kept.store(f))
 }
 
 /// The frames the rig's calibration captures (None for `[calibration] source = "oracle"`, which
