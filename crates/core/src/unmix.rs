@@ -32,6 +32,8 @@ pub const MAX_CONDITION: f64 = 1e12;
 pub const MAX_ITERATIONS: usize = 500;
 /// Rows of the image handled by one rayon task in [`Unmixer::unmix`].
 const ROWS_PER_CHUNK: usize = 8;
+/// Pixels per register block of the projection r = P x̂.
+const LANES: usize = 8;
 
 /// The unmixing problem of one rig, factored once and shared by all pixels.
 #[derive(Clone, Debug)]
@@ -467,30 +469,7 @@ impl Unmixer {
                 return Err((i, format!("channel {j} is {}", x[i])));
             }
         }
-        // Each band in blocks of BLOCK pixels accumulated in a local buffer: one store per
-        // value, the channel planes read from cache.
-        const BLOCK: usize = 64;
-        minr.fill(f32::INFINITY);
-        for (bnd, out) in bands.iter_mut().enumerate() {
-            let p = &self.p32[bnd * c..(bnd + 1) * c];
-            for start in (0..out.len()).step_by(BLOCK) {
-                let end = (start + BLOCK).min(out.len());
-                let mut acc = [0.0f32; BLOCK];
-                let acc = &mut acc[..end - start];
-                for (a, &x) in acc.iter_mut().zip(&xs[0][start..end]) {
-                    *a = p[0] * x;
-                }
-                for (&pj, x) in p[1..].iter().zip(&xs[1..]) {
-                    for (a, &x) in acc.iter_mut().zip(&x[start..end]) {
-                        *a += pj * x;
-                    }
-                }
-                out[start..end].copy_from_slice(acc);
-                for (mn, &a) in minr[start..end].iter_mut().zip(acc.iter()) {
-                    *mn = mn.min(a);
-                }
-            }
-        }
+        self.project(xs, bands, minr);
         let mut stats = UnmixStats {
             pixels: minr.len(),
             ..UnmixStats::default()
@@ -517,6 +496,57 @@ impl Unmixer {
             stats.total_iterations += info.iterations;
         }
         Ok(stats)
+    }
+
+    /// r = P x̂ for every pixel of a chunk, written band by band, and each pixel's smallest band
+    /// in `minr`. Eight pixels at a time: their channel values and sums stay in registers while
+    /// all the bands are formed, so each value is stored once and x̂ is read once.
+    fn project(&self, xs: &[&[f32]], bands: &mut [&mut [f32]], minr: &mut [f32]) {
+        let len = minr.len();
+        let whole = len - len % LANES;
+        for start in (0..whole).step_by(LANES) {
+            self.project_block(xs, bands, minr, start, LANES);
+        }
+        if whole < len {
+            self.project_block(xs, bands, minr, whole, len - whole);
+        }
+    }
+
+    /// [`Unmixer::project`] on the `lanes` ≤ 8 pixels from `start`; inlined, so that for a whole
+    /// block the copies have a length known when compiling (moves, not calls to `memcpy`). The
+    /// sums are added in channel order, as the scalar formula.
+    #[inline(always)]
+    fn project_block(
+        &self,
+        xs: &[&[f32]],
+        bands: &mut [&mut [f32]],
+        minr: &mut [f32],
+        start: usize,
+        lanes: usize,
+    ) {
+        let c = self.c;
+        let at = start..start + lanes;
+        let mut x = [[0.0f32; LANES]; MAX_CHANNELS];
+        for (xj, plane) in x.iter_mut().zip(xs) {
+            xj[..lanes].copy_from_slice(&plane[at.clone()]);
+        }
+        let mut low = [f32::INFINITY; LANES];
+        for (p, out) in self.p32.chunks_exact(c).zip(bands.iter_mut()) {
+            let mut acc = [0.0f32; LANES];
+            for (a, &v) in acc.iter_mut().zip(&x[0]) {
+                *a = p[0] * v;
+            }
+            for (&pj, xj) in p[1..].iter().zip(&x[1..c]) {
+                for (a, &v) in acc.iter_mut().zip(xj) {
+                    *a += pj * v;
+                }
+            }
+            for (l, &a) in low.iter_mut().zip(&acc) {
+                *l = if a < *l { a } else { *l };
+            }
+            out[at.clone()].copy_from_slice(&acc[..lanes]);
+        }
+        minr[at].copy_from_slice(&low[..lanes]);
     }
 }
 
