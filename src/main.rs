@@ -38,7 +38,7 @@ fn install_interrupt_handler() {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(dir) = &cli.pattern_cache {
-        // Before any thread starts; the forward pipeline reads it (twin's pattern_cache).
+        // Before any thread starts; the commands read it (`PatternCache::from_env`).
         std::env::set_var(specmux_twin::pattern_cache::ENV, dir);
     }
     install_interrupt_handler();

@@ -562,3 +562,54 @@ fn reconstruct_says_when_the_frame_overrides_the_experiments_size() {
     // The experiment that made the frame: nothing to say.
     assert!(!ok(d, &args("e64.toml")).contains("scene.size"));
 }
+
+/// The stage names `simulate` printed with their seconds.
+fn stages_run(stdout: &str) -> Vec<&str> {
+    (stdout.lines())
+        .filter(|l| l.trim_end().ends_with(" s") && !l.starts_with("total"))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect()
+}
+
+#[test]
+fn the_command_line_keeps_patterns_and_captures_in_the_pattern_cache() {
+    let scratch = tmpdir("own-cache");
+    let d = scratch.path();
+    std::fs::write(
+        d.join("rig.toml"),
+        "[scene]\nsize = [48, 40]\n[rig.dmd]\nwidth = 48\nheight = 40\n[rig.fourier_filter]\n\
+         [rig.lens]\n[rig.sensor]\n",
+    )
+    .unwrap();
+    let run = |out: &str| {
+        ok(
+            d,
+            &[
+                "--pattern-cache",
+                "kept",
+                "simulate",
+                "rig.toml",
+                "--out",
+                out,
+            ],
+        )
+    };
+    let first = run("a");
+    assert!(
+        stages_run(&first).contains(&"relay-fourier-filter"),
+        "{first}"
+    );
+    let mut kept: Vec<_> = std::fs::read_dir(d.join("kept"))
+        .unwrap()
+        .map(|e| e.unwrap().path().extension().unwrap().to_owned())
+        .collect();
+    kept.sort();
+    assert_eq!(kept, ["captures", "patterns"], "{first}");
+    let second = run("b");
+    let stages = stages_run(&second);
+    assert!(stages.contains(&"pattern-cache"), "{second}");
+    assert!(stages.contains(&"calibration-cache"), "{second}");
+    for made in ["relay-fourier-filter", "calibration-captures"] {
+        assert!(!stages.contains(&made), "{second}");
+    }
+}

@@ -21,6 +21,7 @@ use specmux_report::progress;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::optics::dmd::DmdConfig;
 use specmux_twin::optics::fourier_filter::{FourierFilterConfig, Illumination};
+use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::scene::Materials;
 use specmux_twin::{Experiment, Rig};
 use std::path::{Path, PathBuf};
@@ -181,9 +182,12 @@ fn measure(
     let bar = progress::bar("measuring scene spectra");
     bar.set_length(scenes.len() as u64);
     let mut out = Vec::new();
+    let cache = PatternCache::from_env()?;
     for e in scenes {
         let rig = Rig::build(e, lib, &materials)?;
-        let (sim, _) = Pipeline::build(e, &rig, &materials)?.run()?;
+        let (sim, _) = Pipeline::build(e, &rig, &materials)?
+            .with_pattern_cache(cache.clone())
+            .run()?;
         out.push(SceneSpectra::measure(&scenes::label(e), &sim.channels, n)?);
         progress::step(&bar, "measuring scene spectra")?;
     }

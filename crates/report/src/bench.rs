@@ -48,8 +48,10 @@ pub struct Simulated {
 pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Simulated> {
     let materials = Materials::load(lib)?;
     let rig = Rig::build(exp, lib, &materials)?;
-    let (sim, _) = Pipeline::build(exp, &rig, &materials)?.run()?;
     let cache = PatternCache::from_env()?;
+    let (sim, _) = Pipeline::build(exp, &rig, &materials)?
+        .with_pattern_cache(cache.clone())
+        .run()?;
     let calibration = run::calibration(exp, &rig, &sim, cache.as_ref())?;
     Ok(Simulated {
         exp: exp.clone(),

@@ -596,7 +596,9 @@ pub fn simulate(
     let exp = experiment_for(scene, None)?;
     let materials = specmux_twin::scene::Materials::load(lib)?;
     let rig = specmux_twin::rig::Rig::build(&exp, lib, &materials)?;
-    let pipeline = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?;
+    let cache = PatternCache::from_env()?;
+    let pipeline = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?
+        .with_pattern_cache(cache.clone());
     say!(text, "{}", pipeline.explain());
     for w in &rig.warnings {
         say!(text, "warning: {w}");
@@ -605,7 +607,6 @@ pub fn simulate(
         return Ok(text);
     }
     let (sim, mut times) = pipeline.run()?;
-    let cache = PatternCache::from_env()?;
     let frames = run::captured_calibration(&exp, &rig, &sim, cache.as_ref(), &mut times)?;
     let t = std::time::Instant::now();
     let files = OutputSet::begin(out)?;

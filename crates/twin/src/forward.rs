@@ -179,9 +179,7 @@ impl Pipeline {
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
             let chain = rig.chain(exp)?.with_pair_summer(pair_summer_for(&device));
-            let mut steps = OpticalSteps::new(Arc::new(chain));
-            steps.keep_in(PatternCache::from_env()?);
-            PatternSteps::Imaged(steps)
+            PatternSteps::Imaged(OpticalSteps::new(Arc::new(chain)))
         } else {
             PatternSteps::Ideal(IdealPatternStage {
                 carriers: rig.imaged_carriers.clone(),
@@ -215,8 +213,9 @@ impl Pipeline {
         })
     }
 
-    /// The pipeline with its imaged patterns kept in `cache` (None: none), in place of the one
-    /// `$SPECMUX_PATTERN_CACHE` names; ideal patterns are not cached (they cost milliseconds).
+    /// The pipeline with its imaged patterns kept in `cache` (None, as built: none; the command
+    /// line passes `PatternCache::from_env()`); ideal patterns are not cached (they cost
+    /// milliseconds).
     pub fn with_pattern_cache(mut self, cache: Option<PatternCache>) -> Pipeline {
         if let PatternSteps::Imaged(o) = &mut self.patterns {
             o.keep_in(cache);

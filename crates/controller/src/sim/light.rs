@@ -12,6 +12,7 @@ use crate::plan::timing_of;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_twin::forward::Pipeline;
+use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::scene::{self, Materials};
 use specmux_twin::sensor::Sensor;
 use specmux_twin::{Experiment, Rig};
@@ -78,7 +79,9 @@ impl Light {
     pub fn new(exp: &Experiment, lib: &Library) -> Result<(Light, Rig)> {
         let materials = Materials::load(lib)?;
         let rig = Rig::build(exp, lib, &materials)?;
-        let (sim, _) = Pipeline::build(exp, &rig, &materials)?.run()?;
+        let (sim, _) = Pipeline::build(exp, &rig, &materials)?
+            .with_pattern_cache(PatternCache::from_env()?)
+            .run()?;
         let timing = timing_of(exp);
         let mut cfg = exp.rig.sensor.clone().unwrap_or_default();
         cfg.exposure_s = timing.camera.exposure_s;
