@@ -227,13 +227,19 @@ fn write_run_files(
     lib: &Library,
 ) -> Result<()> {
     let grid = exp.scene.grid(&exp.file)?;
-    write_cube(files, "frame", &d.frame, &["Y".to_string()], npy)?;
-    specmux_io::png::plane_png(&files.path("frame.png"), &d.frame, 0)?;
-    write_cube(files, "cube", &d.cube, &band_names(&grid), npy)?;
-    let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
-    write_cube(files, "channels", &d.xhat, &ch, npy)?;
-    crate::panel::write_figures(exp, lib, Some(&d.truth), &d.cube, files)?;
-    specmux_io::json::write_json(&files.path("report.json"), rep)
+    // The cube (most of the bytes) beside the rest: an EXR is written on one thread.
+    let (cube, rest) = rayon::join(
+        || write_cube(files, "cube", &d.cube, &band_names(&grid), npy),
+        || -> Result<()> {
+            write_cube(files, "frame", &d.frame, &["Y".to_string()], npy)?;
+            specmux_io::png::plane_png(&files.path("frame.png"), &d.frame, 0)?;
+            let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
+            write_cube(files, "channels", &d.xhat, &ch, npy)?;
+            crate::panel::write_figures(exp, lib, Some(&d.truth), &d.cube, files)?;
+            specmux_io::json::write_json(&files.path("report.json"), rep)
+        },
+    );
+    cube.and(rest)
 }
 
 /// `device`: `--device` (None: the experiment's `[compute] device`).
@@ -610,15 +616,22 @@ pub fn simulate(
     let frames = run::captured_calibration(&exp, &rig, &sim, cache.as_ref(), &mut times)?;
     let t = std::time::Instant::now();
     let files = OutputSet::begin(out)?;
-    write_cube(&files, "frame", &sim.frame, &["Y".to_string()], npy)?;
-    specmux_io::png::plane_png(&files.path("frame.png"), &sim.frame, 0)?;
     let scene = &sim.scene;
-    write_cube(&files, "truth", &scene.cube, &band_names(&scene.grid), npy)?;
-    if let Some(frames) = &frames {
-        let dir = files.path("calibration");
-        std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-        specmux_io::frame::write_calibration(&dir, frames)?;
-    }
+    // The true cube (most of the bytes) beside the rest: an EXR is written on one thread.
+    let (truth, rest) = rayon::join(
+        || write_cube(&files, "truth", &scene.cube, &band_names(&scene.grid), npy),
+        || -> Result<()> {
+            write_cube(&files, "frame", &sim.frame, &["Y".to_string()], npy)?;
+            specmux_io::png::plane_png(&files.path("frame.png"), &sim.frame, 0)?;
+            if let Some(frames) = &frames {
+                let dir = files.path("calibration");
+                std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+                specmux_io::frame::write_calibration(&dir, frames)?;
+            }
+            Ok(())
+        },
+    );
+    truth.and(rest)?;
     times.push(specmux_twin::forward::StageTime::since("write-files", t));
     write_report(&files.path("simulate.json"), lib, "stages", &times)?;
     for t in &times {
