@@ -345,7 +345,8 @@ impl Unmixer {
         self.solve(xhat, out_alpha, &mut r)
     }
 
-    /// [`Unmixer::solve_pixel`] on checked input, also writing the band values r = Bα.
+    /// [`Unmixer::solve_pixel`] on checked input, also writing the band values r = Bα (to the
+    /// solver's round-off; the bands it holds at zero exactly 0).
     fn solve(
         &self,
         xhat: &[f64],
@@ -380,8 +381,9 @@ impl Unmixer {
     }
 
     /// Unmix a cube of channel planes x̂ into a cube of band planes r = Bα, α from the QP.
-    /// Bands of solved pixels are B α with the round-off left by the solver (≤ 1e-9 of the
-    /// pixel's scale, checked) set to zero, so every output value is ≥ 0.
+    /// Bands of solved pixels are B α as the solver's steps carried it (the bands it holds at
+    /// zero exactly 0, any other round-off below zero — ≤ 1e-9 of the pixel's scale, checked —
+    /// set to zero), so every output value is ≥ 0.
     pub fn unmix(&self, xhat: &Cube) -> Result<(Cube, UnmixStats)> {
         let mut out = Cube::zeros_on_huge_pages(xhat.width, xhat.height, self.m);
         let stats = self.unmix_into(xhat, &mut out)?;
@@ -909,7 +911,11 @@ mod tests {
         let mut a = [0.0; J];
         for p in 0..w * h {
             let xp: Vec<f64> = (0..6).map(|j| cube.plane(j)[p] as f64).collect();
-            u.solve_pixel(&xp, &mut a).unwrap();
+            let info = u.solve_pixel(&xp, &mut a).unwrap();
+            // The bands the solution holds at zero are zero, not round-off.
+            for &k in info.active_bands() {
+                assert_eq!(out.plane(k)[p], 0.0, "pixel {p} band {k}");
+            }
             let r = &b * DVector::from_column_slice(&a);
             let scale = r.amax();
             for k in 0..BANDS {
