@@ -371,7 +371,7 @@ impl Unmixer {
 
     /// Accept the active set's result: α finite and every band r = Bα ≥ −1e-9·scale.
     fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
-        let worst = r[..self.m].iter().cloned().fold(0.0f64, f64::min);
+        let worst = dual::fold4(&r[..self.m], 0.0, dual::lower);
         if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
                 "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"

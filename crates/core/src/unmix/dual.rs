@@ -100,7 +100,7 @@ impl Unmixer {
         info: &mut SolveInfo,
     ) -> Result<()> {
         let (n, m) = (self.n, self.m);
-        let scale = s[..m].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        let scale = fold4(&s[..m], 0.0, |a, x| if x.abs() > a { x.abs() } else { a });
         let tol = 1e-12 * scale;
         let mut ws = WorkingSet {
             l: [[0.0; MAX_BASIS]; MAX_BASIS],
@@ -193,7 +193,7 @@ impl Unmixer {
 
     /// The band outside the working set with the largest violation normalised by
     /// ‖b_k‖_{H⁻¹}, if it is beyond −`tol`: the normalised values and their minimum without
-    /// branches (four running minima), then the first band that attains it.
+    /// branches (four running minima, `fold4`), then the first band that attains it.
     fn most_violated(
         &self,
         s: &[f64; MAX_BANDS],
@@ -209,13 +209,7 @@ impl Unmixer {
         {
             *vk = if in_w[k] { 0.0 } else { sk * w };
         }
-        let mut lows = [-tol; 4];
-        for chunk in v[..m].chunks(4) {
-            for (low, &x) in lows.iter_mut().zip(chunk) {
-                *low = if x < *low { x } else { *low };
-            }
-        }
-        let low = lows.iter().fold(-tol, |a, &b| if b < a { b } else { a });
+        let low = fold4(&v[..m], -tol, lower);
         if !(low < -tol) {
             return None;
         }
@@ -260,5 +254,29 @@ impl Unmixer {
             }
         }
         alpha
+    }
+}
+
+/// `pick` folded over `values` from `init` in four running lanes, which vectorise where one
+/// chain of comparisons does not; for an extreme (a minimum, a maximum) the order does not
+/// change the result.
+#[inline(always)]
+pub(super) fn fold4(values: &[f64], init: f64, pick: impl Fn(f64, f64) -> f64 + Copy) -> f64 {
+    let mut lanes = [init; 4];
+    for chunk in values.chunks(4) {
+        for (a, &x) in lanes.iter_mut().zip(chunk) {
+            *a = pick(*a, x);
+        }
+    }
+    lanes.into_iter().fold(init, pick)
+}
+
+/// The lower of two values; a NaN `x` is passed over.
+#[inline(always)]
+pub(super) fn lower(a: f64, x: f64) -> f64 {
+    if x < a {
+        x
+    } else {
+        a
     }
 }
