@@ -62,9 +62,9 @@ pub struct Unmixer {
     b_inv_norm: Vec<f64>,
     /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the GPU kernel's starting factor.
     linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
-    /// G = B H⁻¹ Bᵀ, row-major m × m: the band values' response to the multipliers (the dual
-    /// active set runs on it).
-    g_bands: Vec<f64>,
+    /// G = B H⁻¹ Bᵀ by rows, each zero-padded to `MAX_BANDS`: the band values' response to the
+    /// multipliers (the dual active set runs on it).
+    g_bands: Vec<[f64; MAX_BANDS]>,
     /// H⁻¹ b_kᵀ for each band k, band-major m × n: α = α_u + Σ μ_k H⁻¹ b_kᵀ.
     hinv_bt: Vec<f64>,
     condition: f64,
@@ -224,7 +224,10 @@ impl Unmixer {
                 })
                 .collect(),
             linv_t,
-            g_bands: row_major(&g_bands),
+            g_bands: g_bands
+                .row_iter()
+                .map(|row| std::array::from_fn(|k| if k < m { row[k] } else { 0.0 }))
+                .collect(),
             hinv_bt: row_major(&hinv_bt.transpose()),
             condition,
         })
@@ -313,13 +316,19 @@ impl Unmixer {
         a
     }
 
-    /// r = Bα on the bands.
+    /// r = Bα on the bands, eight bands at a time with their sums in registers (each sum from 0
+    /// in basis order, as one pass per basis vector would add them); the bands past the last
+    /// block of eight are left as they are.
     fn spectrum(&self, alpha: &[f64], r: &mut [f64; MAX_BANDS]) {
-        r.fill(0.0);
-        for (col, &a) in self.bt.iter().zip(alpha) {
-            for (rk, bk) in r[..self.m].iter_mut().zip(col) {
-                *rk += bk * a;
+        const BLOCK: usize = 8;
+        for (k0, out) in (0..self.m).step_by(BLOCK).zip(r.chunks_exact_mut(BLOCK)) {
+            let mut acc = [0.0; BLOCK];
+            for (col, &a) in self.bt.iter().zip(alpha) {
+                for (s, &b) in acc.iter_mut().zip(&col[k0..k0 + BLOCK]) {
+                    *s += b * a;
+                }
             }
+            out.copy_from_slice(&acc);
         }
     }
 
