@@ -108,9 +108,11 @@ impl Unmixer {
             mu: [0.0; MAX_BASIS],
             q: 0,
         };
-        let mut in_w = [false; MAX_BANDS];
+        // 1/‖b_k‖_{H⁻¹} for the bands outside the working set, 0 for those in it.
+        let mut weight = [0.0; MAX_BANDS];
+        weight[..m].copy_from_slice(&self.b_inv_norm);
         let mut iterations = 0;
-        while let Some(p) = self.most_violated(s, &in_w, tol) {
+        while let Some(p) = self.most_violated(s, &weight, tol) {
             let gp = &self.g_bands[p];
             let mut mu_p = 0.0;
             // Move towards satisfying band p, dropping bands whose multiplier reaches 0.
@@ -159,12 +161,12 @@ impl Unmixer {
                 }
                 match drop {
                     Some(k) => {
-                        in_w[ws.bands[k]] = false;
+                        weight[ws.bands[k]] = self.b_inv_norm[ws.bands[k]];
                         ws.drop(k);
                     }
                     None => {
                         ws.add(p, mu_p, &y, schur);
-                        in_w[p] = true;
+                        weight[p] = 0.0;
                         break;
                     }
                 }
@@ -192,22 +194,19 @@ impl Unmixer {
     }
 
     /// The band outside the working set with the largest violation normalised by
-    /// ‖b_k‖_{H⁻¹}, if it is beyond −`tol`: the normalised values and their minimum without
-    /// branches (four running minima, `fold4`), then the first band that attains it.
+    /// ‖b_k‖_{H⁻¹}, if it is beyond −`tol`: the normalised values (`weight` is 0 in the working
+    /// set, so its bands give ±0) and their minimum without branches (four running minima,
+    /// `fold4`), then the first band that attains it.
     fn most_violated(
         &self,
         s: &[f64; MAX_BANDS],
-        in_w: &[bool; MAX_BANDS],
+        weight: &[f64; MAX_BANDS],
         tol: f64,
     ) -> Option<usize> {
         let m = self.m;
         let mut v = [0.0; MAX_BANDS];
-        for (k, (vk, (&sk, &w))) in v[..m]
-            .iter_mut()
-            .zip(s.iter().zip(&self.b_inv_norm))
-            .enumerate()
-        {
-            *vk = if in_w[k] { 0.0 } else { sk * w };
+        for ((vk, &sk), &w) in v[..m].iter_mut().zip(s).zip(weight) {
+            *vk = sk * w;
         }
         let low = fold4(&v[..m], -tol, lower);
         if !(low < -tol) {
