@@ -378,7 +378,7 @@ impl Unmixer {
         Ok(info)
     }
 
-    /// Accept the active set's result: α finite and every band r = Bα ≥ −1e-9·scale.
+    /// Accept the active set's result: α finite and every band value r ≥ −1e-9·scale.
     fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
         let worst = dual::fold4(&r[..self.m], 0.0, dual::lower);
         if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
