@@ -58,8 +58,9 @@ pub struct Unmixer {
     /// 1/‖b_k‖_{H⁻¹} = 1/‖L⁻¹b_kᵀ‖ for each row of B (0 for a zero row, which no α can
     /// violate): a band's violation times it is its distance from the constraint in the metric
     /// of H, so the dual method adds the band whose first step raises the objective most (13 %
-    /// fewer steps on dead-leaves than with 1/‖b_k‖; docs/speed.md).
-    b_inv_norm: Vec<f64>,
+    /// fewer steps on dead-leaves than with 1/‖b_k‖; docs/speed.md). Zero-padded to
+    /// `MAX_BANDS`, so the solver's per-pixel copy has a size known when compiling.
+    b_inv_norm: [f64; MAX_BANDS],
     /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the GPU kernel's starting factor.
     linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
     /// G = B H⁻¹ Bᵀ by rows, each zero-padded to `MAX_BANDS`: the band values' response to the
@@ -212,17 +213,18 @@ impl Unmixer {
                 .column_iter()
                 .map(|col| std::array::from_fn(|k| if k < m { col[k] } else { 0.0 }))
                 .collect(),
-            b_inv_norm: b
-                .row_iter()
-                .map(|row| {
-                    let norm = (linv.rows(0, n) * row.transpose()).norm();
-                    if norm > 0.0 {
-                        1.0 / norm
-                    } else {
-                        0.0
-                    }
-                })
-                .collect(),
+            b_inv_norm: std::array::from_fn(|k| {
+                let norm = if k < m {
+                    (linv.rows(0, n) * b.row(k).transpose()).norm()
+                } else {
+                    0.0
+                };
+                if norm > 0.0 {
+                    1.0 / norm
+                } else {
+                    0.0
+                }
+            }),
             linv_t,
             g_bands: g_bands
                 .row_iter()
@@ -251,7 +253,7 @@ impl Unmixer {
             unconstrained: &self.mx,
             projection: &self.p32,
             basis_columns: &self.bt,
-            band_inv_norm: &self.b_inv_norm,
+            band_inv_norm: &self.b_inv_norm[..self.m],
             gains: &self.gain,
             linv_t: &self.linv_t,
         }
@@ -553,7 +555,7 @@ impl Unmixer {
                 }
             }
             for (l, &a) in low.iter_mut().zip(&acc) {
-                *l = if a < *l { a } else { *l };
+                *l = dual::lower(*l, a);
             }
             out[at.clone()].copy_from_slice(&acc[..lanes]);
         }

@@ -109,8 +109,7 @@ impl Unmixer {
             q: 0,
         };
         // 1/‖b_k‖_{H⁻¹} for the bands outside the working set, 0 for those in it.
-        let mut weight = [0.0; MAX_BANDS];
-        weight[..m].copy_from_slice(&self.b_inv_norm);
+        let mut weight = self.b_inv_norm;
         let mut iterations = 0;
         while let Some(p) = self.most_violated(s, &weight, tol) {
             let gp = &self.g_bands[p];
@@ -180,9 +179,10 @@ impl Unmixer {
         // The bands held at zero are zero; at the vertex α = 0 every band is.
         if ws.q == n {
             s.fill(0.0);
-        }
-        for &b in &ws.bands[..ws.q] {
-            s[b] = 0.0;
+        } else {
+            for &b in &ws.bands[..ws.q] {
+                s[b] = 0.0;
+            }
         }
         self.check_feasible(&alpha, s, scale)?;
         out_alpha.copy_from_slice(&alpha[..n]);
@@ -276,7 +276,7 @@ pub(super) fn fold4(values: &[f64], init: f64, pick: impl Fn(f64, f64) -> f64 + 
 
 /// The lower of two values; a NaN `x` is passed over.
 #[inline(always)]
-pub(super) fn lower(a: f64, x: f64) -> f64 {
+pub(super) fn lower<T: PartialOrd>(a: T, x: T) -> T {
     if x < a {
         x
     } else {
