@@ -34,6 +34,12 @@ pub const MAX_ITERATIONS: usize = 500;
 const ROWS_PER_CHUNK: usize = 8;
 /// Pixels per register block of the projection r = P x̂.
 const LANES: usize = 8;
+/// Pixels per block of the unmixing: one 64-byte cache line of every band plane, so that a
+/// block's bands are written once, whole lines at a time.
+const LINE: usize = 16;
+
+/// The band values of one block of pixels, band by band.
+type Block = [[f32; LINE]; MAX_BANDS];
 
 /// The unmixing problem of one rig, factored once and shared by all pixels.
 #[derive(Clone, Debug)]
@@ -432,29 +438,26 @@ impl Unmixer {
         views
             .into_par_iter()
             .enumerate()
-            .map_init(
-                || vec![0.0f32; chunk_px],
-                |minr, (k, mut bands)| {
-                    let start = k * chunk_px;
-                    let len = bands[0].len();
-                    let xs: [&[f32]; MAX_CHANNELS] = std::array::from_fn(|j| {
-                        if j < self.c {
-                            &xhat.plane(j)[start..start + len]
-                        } else {
-                            &[]
-                        }
-                    });
-                    self.unmix_chunk(&xs[..self.c], &mut bands, &mut minr[..len])
-                        .map_err(|(i, msg)| {
-                            let p = start + i;
-                            Error::Numerical(format!(
-                                "unmixing pixel ({}, {}): {msg}",
-                                p % wid,
-                                p / wid
-                            ))
-                        })
-                },
-            )
+            .map(|(k, mut bands)| {
+                let start = k * chunk_px;
+                let len = bands[0].len();
+                let xs: [&[f32]; MAX_CHANNELS] = std::array::from_fn(|j| {
+                    if j < self.c {
+                        &xhat.plane(j)[start..start + len]
+                    } else {
+                        &[]
+                    }
+                });
+                self.unmix_chunk(&xs[..self.c], &mut bands)
+                    .map_err(|(i, msg)| {
+                        let p = start + i;
+                        Error::Numerical(format!(
+                            "unmixing pixel ({}, {}): {msg}",
+                            p % wid,
+                            p / wid
+                        ))
+                    })
+            })
             .try_reduce(UnmixStats::default, |a, b| {
                 Ok(UnmixStats {
                     pixels: a.pixels + b.pixels,
@@ -466,85 +469,123 @@ impl Unmixer {
             })
     }
 
-    /// One chunk: r = P x̂ band by band (plane-major, vectorisable), then the exact solver on the
-    /// pixels with a negative band. `minr` is scratch of the chunk's length. An error carries
-    /// the pixel's offset in the chunk.
+    /// One chunk, block by block: r = P x̂ for every pixel, the exact solver on the pixels
+    /// with a negative band, then the block's bands written. The blocks are the bands' cache
+    /// lines (the first one up to the first line boundary), so whole lines can be streamed to
+    /// memory without first being read. An error carries the pixel's offset in the chunk.
     fn unmix_chunk(
         &self,
         xs: &[&[f32]],
         bands: &mut [&mut [f32]],
-        minr: &mut [f32],
     ) -> std::result::Result<UnmixStats, (usize, String)> {
-        let c = self.c;
         for (j, x) in xs.iter().enumerate() {
             if !all_finite(x) {
                 let i = x.iter().position(|v| !v.is_finite()).unwrap_or(0);
                 return Err((i, format!("channel {j} is {}", x[i])));
             }
         }
-        self.project(xs, bands, minr);
+        let len = xs[0].len();
         let mut stats = UnmixStats {
-            pixels: minr.len(),
+            pixels: len,
             ..UnmixStats::default()
         };
-        let mut xp = [0.0f64; MAX_CHANNELS];
-        let mut alpha = [0.0f64; MAX_BASIS];
-        let mut r = [0.0f64; MAX_BANDS];
-        for i in 0..minr.len() {
-            if minr[i] >= 0.0 {
-                continue;
+        let mut block: Block = [[0.0; LINE]; MAX_BANDS];
+        // The first band's lines begin where (offset + pixel) is a multiple of LINE.
+        let offset = bands[0].as_ptr() as usize / 4 % LINE;
+        let mut start = 0;
+        while start < len {
+            let end = (((offset + start) / LINE + 1) * LINE - offset).min(len);
+            self.unmix_block(xs, start, end - start, &mut block, &mut stats)?;
+            for (out, b) in bands.iter_mut().zip(&block) {
+                store_line(&mut out[start..end], &b[..end - start]);
             }
-            for (xv, x) in xp.iter_mut().zip(xs) {
-                *xv = x[i] as f64;
-            }
-            let info = self
-                .solve(&xp[..c], &mut alpha[..self.n], &mut r)
-                .map_err(|e| (i, e.to_string()))?;
-            for ((out, &v), g) in bands.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
-                out[i] = (v.max(0.0) * g) as f32;
-            }
-            stats.constrained_pixels += 1;
-            stats.bound_pixels += (info.active > 0) as usize;
-            stats.max_iterations = stats.max_iterations.max(info.iterations);
-            stats.total_iterations += info.iterations;
+            start = end;
         }
+        store_fence();
         Ok(stats)
     }
 
-    /// r = P x̂ for every pixel of a chunk, written band by band, and each pixel's smallest band
-    /// in `minr`. Eight pixels at a time: their channel values and sums stay in registers while
-    /// all the bands are formed, so each value is stored once and x̂ is read once.
-    fn project(&self, xs: &[&[f32]], bands: &mut [&mut [f32]], minr: &mut [f32]) {
-        let len = minr.len();
-        let whole = len - len % LANES;
-        for start in (0..whole).step_by(LANES) {
-            self.project_block(xs, bands, minr, start, LANES);
-        }
-        if whole < len {
-            self.project_block(xs, bands, minr, whole, len - whole);
-        }
-    }
-
-    /// [`Unmixer::project`] on the `lanes` ≤ 8 pixels from `start`; inlined, so that for a whole
-    /// block the copies have a length known when compiling (moves, not calls to `memcpy`). The
-    /// sums are added in channel order, as the scalar formula.
+    /// The bands of the `lanes` ≤ 16 pixels from `start` into `block`: projected eight pixels
+    /// at a time, then each pixel with a negative band solved exactly.
     #[inline(always)]
-    fn project_block(
+    fn unmix_block(
         &self,
         xs: &[&[f32]],
-        bands: &mut [&mut [f32]],
-        minr: &mut [f32],
         start: usize,
         lanes: usize,
+        block: &mut Block,
+        stats: &mut UnmixStats,
+    ) -> std::result::Result<(), (usize, String)> {
+        let mut low = [f32::INFINITY; LINE];
+        if lanes == LINE {
+            self.project(xs, start, LANES, block, 0, &mut low);
+            self.project(xs, start + LANES, LANES, block, LANES, &mut low);
+        } else {
+            for from in (0..lanes).step_by(LANES) {
+                let n = (lanes - from).min(LANES);
+                self.project(xs, start + from, n, block, from, &mut low);
+            }
+        }
+        for (l, _) in low[..lanes]
+            .iter()
+            .enumerate()
+            .filter(|(_, &v)| !(v >= 0.0))
+        {
+            self.solve_lane(xs, start + l, block, l, stats)
+                .map_err(|e| (start + l, e.to_string()))?;
+        }
+        Ok(())
+    }
+
+    /// The exact solution of pixel `i`, written into lane `l` of `block` (bands r ≥ 0 times
+    /// their gains), and counted in `stats`.
+    fn solve_lane(
+        &self,
+        xs: &[&[f32]],
+        i: usize,
+        block: &mut Block,
+        l: usize,
+        stats: &mut UnmixStats,
+    ) -> Result<()> {
+        let mut xp = [0.0f64; MAX_CHANNELS];
+        for (xv, x) in xp.iter_mut().zip(xs) {
+            *xv = x[i] as f64;
+        }
+        let mut alpha = [0.0f64; MAX_BASIS];
+        let mut r = [0.0f64; MAX_BANDS];
+        let info = self.solve(&xp[..self.c], &mut alpha[..self.n], &mut r)?;
+        for ((b, &v), g) in block.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
+            b[l] = (v.max(0.0) * g) as f32;
+        }
+        stats.constrained_pixels += 1;
+        stats.bound_pixels += (info.active > 0) as usize;
+        stats.max_iterations = stats.max_iterations.max(info.iterations);
+        stats.total_iterations += info.iterations;
+        Ok(())
+    }
+
+    /// r = P x̂ for the `lanes` ≤ 8 pixels from `start`, into lanes `to..` of `block`, and each
+    /// pixel's smallest band into `low`. The pixels' channel values and sums stay in registers
+    /// while all the bands are formed; inlined, so that for a whole block the copies have a
+    /// length known when compiling (moves, not calls to `memcpy`). The sums are added in
+    /// channel order, as the scalar formula.
+    #[inline(always)]
+    fn project(
+        &self,
+        xs: &[&[f32]],
+        start: usize,
+        lanes: usize,
+        block: &mut Block,
+        to: usize,
+        low: &mut [f32; LINE],
     ) {
         let c = self.c;
-        let at = start..start + lanes;
         let mut x = [[0.0f32; LANES]; MAX_CHANNELS];
         for (xj, plane) in x.iter_mut().zip(xs) {
-            xj[..lanes].copy_from_slice(&plane[at.clone()]);
+            xj[..lanes].copy_from_slice(&plane[start..start + lanes]);
         }
-        let mut low = [f32::INFINITY; LANES];
-        for (p, out) in self.p32.chunks_exact(c).zip(bands.iter_mut()) {
+        let low = &mut low[to..to + lanes];
+        for (p, out) in self.p32.chunks_exact(c).zip(block.iter_mut()) {
             let mut acc = [0.0f32; LANES];
             for (a, &v) in acc.iter_mut().zip(&x[0]) {
                 *a = p[0] * v;
@@ -557,10 +598,36 @@ impl Unmixer {
             for (l, &a) in low.iter_mut().zip(&acc) {
                 *l = dual::lower(*l, a);
             }
-            out[at.clone()].copy_from_slice(&acc[..lanes]);
+            out[to..to + lanes].copy_from_slice(&acc[..lanes]);
         }
-        minr[at].copy_from_slice(&low[..lanes]);
     }
+}
+
+/// `dst` ← `src`; a whole 64-byte line by non-temporal stores (it goes to memory without being
+/// read into the cache first: the 73 MB of bands of a frame are not read again soon).
+#[inline(always)]
+fn store_line(dst: &mut [f32], src: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if dst.len() == LINE && dst.as_ptr() as usize % 64 == 0 {
+        use std::arch::x86_64::{_mm_loadu_ps, _mm_stream_ps};
+        for k in (0..LINE).step_by(4) {
+            // SAFETY: dst holds 16 values from a 64-byte boundary, so each 16-byte store is
+            // aligned and in bounds; src holds 16 values.
+            unsafe { _mm_stream_ps(dst.as_mut_ptr().add(k), _mm_loadu_ps(src.as_ptr().add(k))) };
+        }
+        return;
+    }
+    dst.copy_from_slice(src);
+}
+
+/// Orders the non-temporal stores of [`store_line`] before any later store (such as the one
+/// telling another thread that the chunk is done).
+fn store_fence() {
+    // SAFETY: SSE is part of x86-64; the fence has no other effect.
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        std::arch::x86_64::_mm_sfence()
+    };
 }
 
 /// True when every value is finite, by a lane-wise sum of `v − v` (0 for finite values, NaN
@@ -902,13 +969,26 @@ mod tests {
         let b = basis(&mut rng);
         let f = filters(&mut rng, &b);
         let u = Unmixer::new(&f, &b, 0.2).unwrap();
-        let (w, h) = (37, 19);
-        let s = smooth_spectra(&mut rng, w * h);
-        let x = &f * (b.transpose() * s);
+        // Planes off the cache lines (37 × 19) and on them (64 × 24: whole lines streamed).
+        for (w, h) in [(37, 19), (64, 24)] {
+            check_cube_unmixing(&u, &b, &f, &mut rng, w, h);
+        }
+    }
+
+    fn check_cube_unmixing(
+        u: &Unmixer,
+        b: &DMatrix<f64>,
+        f: &DMatrix<f64>,
+        rng: &mut Pcg64,
+        w: usize,
+        h: usize,
+    ) {
+        let s = smooth_spectra(rng, w * h);
+        let x = f * (b.transpose() * s);
         let mut cube = Cube::zeros(w, h, 6);
         for p in 0..w * h {
             for j in 0..6 {
-                cube.plane_mut(j)[p] = (x[(j, p)] * (1.0 + 0.4 * normal(&mut rng))) as f32;
+                cube.plane_mut(j)[p] = (x[(j, p)] * (1.0 + 0.4 * normal(rng))) as f32;
             }
         }
         let (out, stats) = u.unmix(&cube).unwrap();
@@ -927,7 +1007,7 @@ mod tests {
             for &k in info.active_bands() {
                 assert_eq!(out.plane(k)[p], 0.0, "pixel {p} band {k}");
             }
-            let r = &b * DVector::from_column_slice(&a);
+            let r = b * DVector::from_column_slice(&a);
             let scale = r.amax();
             for k in 0..BANDS {
                 let got = out.plane(k)[p] as f64;
