@@ -5,9 +5,14 @@ use crate::atomic;
 use specmux_core::{Cube, Error, Result};
 use std::path::Path;
 
-/// Encode an 8-bit image as PNG and write it; the adaptive row filter keeps figures of noisy
-/// fields small (docs/ keeps its figures under 300 kB).
-pub fn write_png(path: &Path, img: image::DynamicImage) -> Result<()> {
+/// Encode an image (8-bit RGB or grey, 16-bit grey) as PNG and write it; the adaptive row
+/// filter keeps figures of noisy fields small (docs/ keeps its figures under 300 kB). It borrows
+/// the image, so a caller that shows it elsewhere too need not copy it.
+pub fn write_png<P>(path: &Path, img: &image::ImageBuffer<P, Vec<P::Subpixel>>) -> Result<()>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+{
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let mut bytes = Vec::new();
     let png =
@@ -30,7 +35,7 @@ pub fn plane_png(path: &Path, cube: &Cube, plane: usize) -> Result<()> {
         .collect();
     let img = image::GrayImage::from_raw(cube.width as u32, cube.height as u32, px)
         .ok_or_else(|| Error::Shape("plane size".into()))?;
-    write_png(path, image::DynamicImage::ImageLuma8(img))
+    write_png(path, &img)
 }
 
 /// A 16-bit grey PNG of a one-plane frame of whole DN (a raw camera frame, as the EMVA 1288
@@ -63,7 +68,7 @@ pub fn dn_png16(path: &Path, frame: &Cube) -> Result<()> {
         px,
     )
     .ok_or_else(|| fail("plane size".into()))?;
-    write_png(path, image::DynamicImage::ImageLuma16(img))
+    write_png(path, &img)
 }
 
 #[cfg(test)]

@@ -494,7 +494,6 @@ pub fn write_figures(
             ("cube_rgb.png", Some(&est_rgb)),
         ] {
             if let Some(img) = img {
-                let img = image::DynamicImage::ImageRgb8(img.clone());
                 specmux_io::png::write_png(&files.path(name), img)?;
             }
         }

@@ -212,7 +212,7 @@ pub fn render_png(
         root.present().map_err(|e| err(e.to_string()))?;
     }
     let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| err("plot buffer".into()))?;
-    write_png(path, image::DynamicImage::ImageRgb8(img))
+    write_png(path, &img)
 }
 
 /// A drawing error as the text `render_png` reports.
