@@ -214,7 +214,7 @@ fn raw_frames_are_calibrated_back_to_the_noiseless_frame() {
         "raw frames hold integer DN"
     );
     let r = reconstructor(&exp).unwrap();
-    let mut cal = r.calibration.linearise(&raw).unwrap();
+    let mut cal = r.calibration.linearise(&raw).unwrap().into_owned();
     let (y, fs) = noiseless;
     // Linear units are DN above dark at the flat's mean gain: y · K · e⁻(full scale) / full scale.
     let mean = |c: &[f32]| c.iter().map(|v| *v as f64).sum::<f64>() / c.len() as f64;

@@ -12,6 +12,7 @@ use crate::Cube;
 use rayon::prelude::*;
 use rustfft::num_complex::{Complex32, Complex64};
 use serde::Serialize;
+use std::borrow::Cow;
 
 /// The frames a calibration captures, each the mean of `frames_averaged` exposures.
 #[derive(Clone, Debug)]
@@ -199,11 +200,12 @@ impl Calibration {
         })
     }
 
-    /// A raw frame in linear units (dark/flat corrected when the rig has a camera).
-    pub fn linearise(&self, raw: &Cube) -> Result<Cube> {
+    /// A raw frame in linear units (dark/flat corrected when the rig has a camera; the frame
+    /// itself, not a copy, when it has none).
+    pub fn linearise<'a>(&self, raw: &'a Cube) -> Result<Cow<'a, Cube>> {
         match &self.dark_flat {
-            Some(df) => df.apply(raw),
-            None => Ok(raw.clone()),
+            Some(df) => Ok(Cow::Owned(df.apply(raw)?)),
+            None => Ok(Cow::Borrowed(raw)),
         }
     }
 }

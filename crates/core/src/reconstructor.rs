@@ -446,7 +446,7 @@ impl Reconstructor {
     /// x̂: the frame linearised, demultiplexed and mixed back to channels (the real-time path's
     /// first half, without de-aliasing).
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
-        let z = self.demux.run(&self.calibration.linearise(frame)?)?;
+        let z = self.demux.run(&*self.calibration.linearise(frame)?)?;
         self.to_channels_owned(z)
     }
 
