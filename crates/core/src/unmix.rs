@@ -517,6 +517,7 @@ impl Unmixer {
         stats: &mut UnmixStats,
     ) -> std::result::Result<(), (usize, String)> {
         let mut low = [f32::INFINITY; LINE];
+        // A whole line spelled out, so that both halves are projected with a constant width.
         if lanes == LINE {
             self.project(xs, start, LANES, block, 0, &mut low);
             self.project(xs, start + LANES, LANES, block, LANES, &mut low);
