@@ -254,3 +254,34 @@ fn the_channel_table_reports_the_de_aliased_channels_beside_the_demultiplexed() 
     }
     assert!(joint.table().contains("final dB"));
 }
+
+/// The real-time loop's demultiplexing into a cube it keeps gives the bits of a new cube's, with
+/// and without a crosstalk correction (the mixed and the direct path), whatever the kept cube
+/// held; a cube of the wrong size is refused.
+#[test]
+fn demultiplexing_into_a_kept_cube_gives_the_same_bits() {
+    for correction in ["timing", "none"] {
+        let exp = experiment(&format!(
+            "[rig.timing]\n{}[reconstruct]\ncrosstalk = \"{correction}\"\n",
+            delays(0.25)
+        ));
+        let (rig, m) = setup(&exp);
+        let (sim, _) = Pipeline::build(&exp, &rig, &m).unwrap().run().unwrap();
+        let r = run::reconstructor(&exp, &rig, &sim, None).unwrap();
+        let fresh = r.demultiplex(&sim.frame).unwrap();
+        let mut kept = Cube::from_vec(64, 64, 6, vec![f32::NAN; 64 * 64 * 6]).unwrap();
+        r.demultiplex_into(&sim.frame, &mut kept).unwrap();
+        assert_eq!(r.demix.is_some(), correction == "timing");
+        assert!(
+            kept.data
+                .iter()
+                .zip(&fresh.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{correction}"
+        );
+        let err = r
+            .demultiplex_into(&sim.frame, &mut Cube::zeros(64, 64, 5))
+            .unwrap_err();
+        assert!(err.to_string().contains("64×64×5"), "{err}");
+    }
+}

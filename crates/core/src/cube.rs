@@ -126,32 +126,55 @@ impl Cube {
 
     /// Linear map across planes: out_k = Σ_j m[k][j] · in_j, pixel by pixel (m is planes_out × planes_in).
     pub fn mix(&self, m: &[Vec<f64>]) -> Result<Cube> {
+        let mut out = Cube::zeros(self.width, self.height, m.len());
+        self.mix_into(m, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Cube::mix`] into a cube of the right size that the caller keeps (its values are
+    /// overwritten, not added to).
+    pub fn mix_into(&self, m: &[Vec<f64>], out: &mut Cube) -> Result<()> {
         if m.iter().any(|row| row.len() != self.planes) {
             return Err(Error::Shape(format!(
                 "mixing matrix rows must have {} entries",
                 self.planes
             )));
         }
-        let mut out = Cube::zeros(self.width, self.height, m.len());
+        if (out.width, out.height, out.planes) != (self.width, self.height, m.len()) {
+            return Err(Error::Shape(format!(
+                "mixing {}×{} into a {}×{}×{} cube; {} planes expected",
+                self.width,
+                self.height,
+                out.width,
+                out.height,
+                out.planes,
+                m.len()
+            )));
+        }
         use rayon::prelude::*;
         out.data
             .par_chunks_mut(self.pixels().max(1))
             .zip(m.par_iter())
             .for_each(|(dst, row)| {
-                let terms = row.iter().enumerate().filter(|(_, &w)| w != 0.0);
-                for (k, (j, &w)) in terms.enumerate() {
+                let mut terms = row.iter().enumerate().filter(|(_, &w)| w != 0.0);
+                // The first term is written, not added: it overwrites what the cube held, and a
+                // fresh page read before its first write is mapped twice, the second time with
+                // a TLB shootdown of every core (0.0 + w·s keeps the sum's bits).
+                match terms.next() {
+                    Some((j, &w)) => {
+                        let w = w as f32;
+                        let src = dst.iter_mut().zip(self.plane(j));
+                        src.for_each(|(d, s)| *d = 0.0 + w * s);
+                    }
+                    None => dst.fill(0.0),
+                }
+                for (j, &w) in terms {
                     let w = w as f32;
                     let src = dst.iter_mut().zip(self.plane(j));
-                    // The first term is written, not added to the zeros: a fresh page read
-                    // before its first write is mapped twice, the second time with a TLB
-                    // shootdown of every core (0.0 + w·s keeps the sum's bits).
-                    match k {
-                        0 => src.for_each(|(d, s)| *d = 0.0 + w * s),
-                        _ => src.for_each(|(d, s)| *d += w * s),
-                    }
+                    src.for_each(|(d, s)| *d += w * s);
                 }
             });
-        Ok(out)
+        Ok(())
     }
 }
 

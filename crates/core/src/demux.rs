@@ -291,6 +291,21 @@ impl Demux {
 
     /// Demultiplex a frame (one plane) into one plane x̂_i per carrier.
     pub fn run(&self, frame: &Cube) -> Result<Cube> {
+        let mut out = Cube::zeros(frame.width, frame.height, self.windows.len());
+        self.run_into(frame, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Demux::run`] into a cube that the caller keeps from frame to frame (every value is
+    /// overwritten), so a camera loop does not clear a new one each frame.
+    pub fn run_into(&self, frame: &Cube, out: &mut Cube) -> Result<()> {
+        let planes = self.windows.len();
+        if (out.width, out.height, out.planes) != (frame.width, frame.height, planes) {
+            return Err(Error::Shape(format!(
+                "demultiplexing into a {}×{}×{} cube; {}×{}×{planes} expected",
+                out.width, out.height, out.planes, frame.width, frame.height
+            )));
+        }
         if frame.planes != 1 || frame.width != self.fft.w || frame.height != self.fft.h {
             return Err(Error::Shape(format!(
                 "frame {}×{}×{} for a demultiplexer of {}×{}",
@@ -303,13 +318,12 @@ impl Demux {
             ));
         }
         let spec = self.spectrum(&frame.data);
-        let mut out = Cube::zeros(frame.width, frame.height, self.windows.len());
         out.planes_mut()
             .collect::<Vec<_>>()
             .into_par_iter()
             .zip(self.windows.par_iter().zip(&self.gains).zip(&self.offsets))
             .for_each(|(plane, ((win, g), o))| self.extract_into(&spec, win, *g, *o, plane));
-        Ok(out)
+        Ok(())
     }
 
     /// The best any crop of this size can do: each plane of `channels` low-passed by the same

@@ -450,6 +450,16 @@ impl Reconstructor {
         self.to_channels_owned(z)
     }
 
+    /// [`Reconstructor::demultiplex`] into a cube of the right size that the caller keeps from
+    /// frame to frame (every value overwritten): the real-time loop's first half.
+    pub fn demultiplex_into(&self, frame: &Cube, out: &mut Cube) -> Result<()> {
+        let measured = self.calibration.linearise(frame)?;
+        match &self.demix {
+            Some(m) => self.demux.run(&measured)?.mix_into(m, out),
+            None => self.demux.run_into(&measured, out),
+        }
+    }
+
     /// α = H⁻¹Fᵀx per pixel: the unmixing without its constraint (the joint method's seed).
     pub fn unconstrained_alpha(&self, x: &Cube) -> Result<Cube> {
         let m = self.unmixer.tables().unconstrained;
