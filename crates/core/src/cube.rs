@@ -198,4 +198,15 @@ mod tests {
             .unwrap();
         assert_eq!(m.data, vec![3.0, 0.0, 6.0]);
     }
+
+    #[test]
+    fn mix_into_overwrites_what_the_cube_held() {
+        let c = Cube::from_vec(1, 1, 2, vec![1.0, 2.0]).unwrap();
+        let mut out = Cube::from_vec(1, 1, 3, vec![f32::NAN; 3]).unwrap();
+        c.mix_into(&[vec![1.0, 1.0], vec![0.0, 0.0], vec![0.0, 3.0]], &mut out)
+            .unwrap();
+        assert_eq!(out.data, vec![3.0, 0.0, 6.0]);
+        let mut wrong = Cube::zeros(1, 1, 2);
+        assert!(c.mix_into(&[vec![1.0, 1.0]; 3], &mut wrong).is_err());
+    }
 }
