@@ -207,6 +207,6 @@ mod tests {
             .unwrap();
         assert_eq!(out.data, vec![3.0, 0.0, 6.0]);
         let mut wrong = Cube::zeros(1, 1, 2);
-        assert!(c.mix_into(&[vec![1.0, 1.0]; 3], &mut wrong).is_err());
+        assert!(c.mix_into(&vec![vec![1.0, 1.0]; 3], &mut wrong).is_err());
     }
 }
