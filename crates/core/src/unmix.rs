@@ -484,25 +484,36 @@ impl Unmixer {
                 return Err((i, format!("channel {j} is {}", x[i])));
             }
         }
-        let len = xs[0].len();
         let mut stats = UnmixStats {
-            pixels: len,
+            pixels: xs[0].len(),
             ..UnmixStats::default()
         };
+        let done = self.unmix_lines(xs, bands, &mut stats);
+        store_fence();
+        done.map(|()| stats)
+    }
+
+    /// [`Unmixer::unmix_chunk`]'s blocks, each written as soon as it is solved.
+    fn unmix_lines(
+        &self,
+        xs: &[&[f32]],
+        bands: &mut [&mut [f32]],
+        stats: &mut UnmixStats,
+    ) -> std::result::Result<(), (usize, String)> {
+        let len = xs[0].len();
         let mut block: Block = [[0.0; LINE]; MAX_BANDS];
         // The first band's lines begin where (offset + pixel) is a multiple of LINE.
         let offset = bands[0].as_ptr() as usize / 4 % LINE;
         let mut start = 0;
         while start < len {
             let end = (((offset + start) / LINE + 1) * LINE - offset).min(len);
-            self.unmix_block(xs, start, end - start, &mut block, &mut stats)?;
+            self.unmix_block(xs, start, end - start, &mut block, stats)?;
             for (out, b) in bands.iter_mut().zip(&block) {
                 store_line(&mut out[start..end], &b[..end - start]);
             }
             start = end;
         }
-        store_fence();
-        Ok(stats)
+        Ok(())
     }
 
     /// The bands of the `lanes` ≤ 16 pixels from `start` into `block`: projected eight pixels
@@ -622,7 +633,7 @@ fn store_line(dst: &mut [f32], src: &[f32]) {
 }
 
 /// Orders the non-temporal stores of [`store_line`] before any later store (such as the one
-/// telling another thread that the chunk is done).
+/// telling another thread that the chunk is done, or failed).
 fn store_fence() {
     // SAFETY: SSE is part of x86-64; the fence has no other effect.
     #[cfg(target_arch = "x86_64")]
