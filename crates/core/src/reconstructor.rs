@@ -446,8 +446,9 @@ impl Reconstructor {
     /// x̂: the frame linearised, demultiplexed and mixed back to channels (the real-time path's
     /// first half, without de-aliasing).
     pub fn demultiplex(&self, frame: &Cube) -> Result<Cube> {
-        let z = self.demux.run(&*self.calibration.linearise(frame)?)?;
-        self.to_channels_owned(z)
+        let mut out = Cube::zeros(frame.width, frame.height, self.demux.windows.len());
+        self.demultiplex_into(frame, &mut out)?;
+        Ok(out)
     }
 
     /// [`Reconstructor::demultiplex`] into a cube of the right size that the caller keeps from
@@ -472,15 +473,6 @@ impl Reconstructor {
         match &self.demix {
             Some(m) => z.mix(m),
             None => Ok(z.clone()),
-        }
-    }
-
-    /// [`Reconstructor::to_channels`] of a z no longer needed: returned as is (not copied)
-    /// without a correction.
-    fn to_channels_owned(&self, z: Cube) -> Result<Cube> {
-        match &self.demix {
-            Some(m) => z.mix(m),
-            None => Ok(z),
         }
     }
 

@@ -34,6 +34,8 @@ pub const MAX_ITERATIONS: usize = 500;
 const ROWS_PER_CHUNK: usize = 8;
 /// Pixels per register block of the projection r = P x̂.
 const LANES: usize = 8;
+/// Bands per register block of the solver's band sums ([`band_blocks`]).
+const BAND_BLOCK: usize = 8;
 /// Pixels per block of the unmixing: one 64-byte cache line of every band plane, so that a
 /// block's bands are written once, whole lines at a time.
 const LINE: usize = 16;
@@ -215,16 +217,9 @@ impl Unmixer {
             mx: row_major(&mmat),
             p32: row_major(&p).iter().map(|&v| v as f32).collect(),
             gain: vec![1.0; m],
-            bt: b
-                .column_iter()
-                .map(|col| std::array::from_fn(|k| if k < m { col[k] } else { 0.0 }))
-                .collect(),
-            b_inv_norm: std::array::from_fn(|k| {
-                let norm = if k < m {
-                    (linv.rows(0, n) * b.row(k).transpose()).norm()
-                } else {
-                    0.0
-                };
+            bt: b.column_iter().map(|col| padded(m, |k| col[k])).collect(),
+            b_inv_norm: padded(m, |k| {
+                let norm = (linv.rows(0, n) * b.row(k).transpose()).norm();
                 if norm > 0.0 {
                     1.0 / norm
                 } else {
@@ -234,7 +229,7 @@ impl Unmixer {
             linv_t,
             g_bands: g_bands
                 .row_iter()
-                .map(|row| std::array::from_fn(|k| if k < m { row[k] } else { 0.0 }))
+                .map(|row| padded(m, |k| row[k]))
                 .collect(),
             hinv_bt: row_major(&hinv_bt.transpose()),
             condition,
@@ -328,11 +323,10 @@ impl Unmixer {
     /// in basis order, as one pass per basis vector would add them); the bands past the last
     /// block of eight are left as they are.
     fn spectrum(&self, alpha: &[f64], r: &mut [f64; MAX_BANDS]) {
-        const BLOCK: usize = 8;
-        for (k0, out) in (0..self.m).step_by(BLOCK).zip(r.chunks_exact_mut(BLOCK)) {
-            let mut acc = [0.0; BLOCK];
+        for (at, out) in band_blocks(self.m, r) {
+            let mut acc = [0.0; BAND_BLOCK];
             for (col, &a) in self.bt.iter().zip(alpha) {
-                for (s, &b) in acc.iter_mut().zip(&col[k0..k0 + BLOCK]) {
+                for (s, &b) in acc.iter_mut().zip(&col[at.clone()]) {
                     *s += b * a;
                 }
             }
@@ -613,6 +607,23 @@ impl Unmixer {
             out[to..to + lanes].copy_from_slice(&acc[..lanes]);
         }
     }
+}
+
+/// The `m` band values `value(k)`, zero-padded to `MAX_BANDS` (the solver's per-band arrays).
+fn padded(m: usize, value: impl Fn(usize) -> f64) -> [f64; MAX_BANDS] {
+    std::array::from_fn(|k| if k < m { value(k) } else { 0.0 })
+}
+
+/// Bands eight at a time: each block's range and its values in `s` (zero-padded past the last
+/// band, so the last block is whole), for sums kept in registers across a block.
+fn band_blocks(
+    m: usize,
+    s: &mut [f64; MAX_BANDS],
+) -> impl Iterator<Item = (std::ops::Range<usize>, &mut [f64])> {
+    (0..m)
+        .step_by(BAND_BLOCK)
+        .zip(s.chunks_exact_mut(BAND_BLOCK))
+        .map(|(k0, out)| (k0..k0 + BAND_BLOCK, out))
 }
 
 /// `dst` ← `src`; a whole 64-byte line by non-temporal stores (it goes to memory without being

@@ -11,8 +11,10 @@
 
 use crate::error::Error;
 use crate::error::Result;
+use crate::unmix::band_blocks;
 use crate::unmix::SolveInfo;
 use crate::unmix::Unmixer;
+use crate::unmix::BAND_BLOCK;
 use crate::unmix::MAX_BANDS;
 use crate::unmix::MAX_BASIS;
 use crate::unmix::MAX_ITERATIONS;
@@ -225,10 +227,8 @@ impl Unmixer {
         ws: &WorkingSet,
         r: &Vector,
     ) {
-        const BLOCK: usize = 8;
-        for (k0, out) in (0..self.m).step_by(BLOCK).zip(s.chunks_exact_mut(BLOCK)) {
-            let at = k0..k0 + BLOCK;
-            let mut acc = [0.0; BLOCK];
+        for (at, out) in band_blocks(self.m, s) {
+            let mut acc = [0.0; BAND_BLOCK];
             acc.copy_from_slice(out);
             for (v, g) in acc.iter_mut().zip(&gp[at.clone()]) {
                 *v += t * g;
