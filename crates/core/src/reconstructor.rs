@@ -455,9 +455,10 @@ impl Reconstructor {
     /// frame to frame (every value overwritten): the real-time loop's first half.
     pub fn demultiplex_into(&self, frame: &Cube, out: &mut Cube) -> Result<()> {
         let measured = self.calibration.linearise(frame)?;
+        self.demux.run_into(&measured, out)?;
         match &self.demix {
-            Some(m) => self.demux.run(&measured)?.mix_into(m, out),
-            None => self.demux.run_into(&measured, out),
+            Some(m) => out.mix_in_place(m),
+            None => Ok(()),
         }
     }
 
