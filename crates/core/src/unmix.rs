@@ -382,7 +382,7 @@ impl Unmixer {
 
     /// Accept the active set's result: α finite and every band value r ≥ −1e-9·scale.
     fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
-        let worst = dual::fold4(&r[..self.m], 0.0, dual::lower);
+        let worst = dual::fold8(&r[..dual::padded_len(self.m)], 0.0, dual::lower);
         if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
                 "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"

@@ -102,7 +102,13 @@ impl Unmixer {
         info: &mut SolveInfo,
     ) -> Result<()> {
         let (n, m) = (self.n, self.m);
-        let scale = fold4(&s[..m], 0.0, |a, x| if x.abs() > a { x.abs() } else { a });
+        let scale = fold8(&s[..padded_len(m)], 0.0, |a, x| {
+            if x.abs() > a {
+                x.abs()
+            } else {
+                a
+            }
+        });
         let tol = 1e-12 * scale;
         let mut ws = WorkingSet {
             l: [[0.0; MAX_BASIS]; MAX_BASIS],
@@ -197,24 +203,27 @@ impl Unmixer {
 
     /// The band outside the working set with the largest violation normalised by
     /// ‖b_k‖_{H⁻¹}, if it is beyond −`tol`: the normalised values (`weight` is 0 in the working
-    /// set, so its bands give ±0) and their minimum without branches (four running minima,
-    /// `fold4`), then the first band that attains it.
+    /// set, so its bands give ±0, and past the last band 0) over whole blocks of eight, their
+    /// minimum without branches (eight running minima, `fold8`), then the first band that attains
+    /// it, from a bit mask of the bands equal to it (no branch per band either).
     fn most_violated(
         &self,
         s: &[f64; MAX_BANDS],
         weight: &[f64; MAX_BANDS],
         tol: f64,
     ) -> Option<usize> {
-        let m = self.m;
+        let len = padded_len(self.m);
         let mut v = [0.0; MAX_BANDS];
-        for ((vk, &sk), &w) in v[..m].iter_mut().zip(s).zip(weight) {
+        for ((vk, &sk), &w) in v[..len].iter_mut().zip(s).zip(weight) {
             *vk = sk * w;
         }
-        let low = fold4(&v[..m], -tol, lower);
+        let low = fold8(&v[..len], -tol, lower);
         if !(low < -tol) {
             return None;
         }
-        v[..m].iter().position(|&x| x == low)
+        let at = (v[..len].iter().enumerate())
+            .fold(0u64, |mask, (k, &x)| mask | ((x == low) as u64) << k);
+        Some(at.trailing_zeros() as usize)
     }
 
     /// s += t·(G_·p − G_·A r): the band values along the step, eight bands at a time in
@@ -260,18 +269,25 @@ impl Unmixer {
     }
 }
 
-/// `pick` folded over `values` from `init` in four running lanes, which vectorise where one
-/// chain of comparisons does not; for an extreme (a minimum, a maximum) the order does not
-/// change the result.
+/// `pick` folded over `values` (a whole number of eight-band blocks) from `init` in eight running
+/// lanes, which vectorise where one chain of comparisons does not; for an extreme (a minimum, a
+/// maximum) the order does not change the result.
 #[inline(always)]
-pub(super) fn fold4(values: &[f64], init: f64, pick: impl Fn(f64, f64) -> f64 + Copy) -> f64 {
-    let mut lanes = [init; 4];
-    for chunk in values.chunks(4) {
+pub(super) fn fold8(values: &[f64], init: f64, pick: impl Fn(f64, f64) -> f64 + Copy) -> f64 {
+    let mut lanes = [init; BAND_BLOCK];
+    for chunk in values.chunks_exact(BAND_BLOCK) {
         for (a, &x) in lanes.iter_mut().zip(chunk) {
             *a = pick(*a, x);
         }
     }
     lanes.into_iter().fold(init, pick)
+}
+
+/// The bands rounded up to whole eight-band blocks: the solver's arrays hold 0 past `m`
+/// (zero-padded tables), which no extreme it takes over them can pick.
+#[inline(always)]
+pub(super) fn padded_len(m: usize) -> usize {
+    m.next_multiple_of(BAND_BLOCK)
 }
 
 /// The lower of two values; a NaN `x` is passed over.
@@ -281,5 +297,39 @@ pub(super) fn lower<T: PartialOrd>(a: T, x: T) -> T {
         x
     } else {
         a
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::unmix::padded;
+    use nalgebra::DMatrix;
+
+    /// Eleven bands (a whole block of eight and part of the next), J = 2.
+    fn unmixer() -> Unmixer {
+        let b = DMatrix::from_fn(11, 2, |k, j| if j == 0 { 1.0 } else { k as f64 / 10.0 });
+        Unmixer::new(&DMatrix::identity(2, 2), &b, 0.0).unwrap()
+    }
+
+    #[test]
+    fn the_most_violated_band_is_the_first_at_the_lowest_weighted_value() {
+        let u = unmixer();
+        let values = [0.5, -0.2, -0.7, 0.1, -0.7, 0.0, 0.3, 0.0, 0.2, -0.35, 0.0];
+        let s = padded(11, |k| values[k]);
+        let ones = padded(11, |_| 1.0);
+        // A tie: the first of the two bands at −0.7.
+        assert_eq!(u.most_violated(&s, &ones, 1e-12), Some(2));
+        // Band 2 in the working set (weight 0): band 4 ties no more.
+        let mut w = ones;
+        w[2] = 0.0;
+        assert_eq!(u.most_violated(&s, &w, 1e-12), Some(4));
+        // The weights scale the violations: band 9 of the second block wins at weight 3.
+        w[9] = 3.0;
+        assert_eq!(u.most_violated(&s, &w, 1e-12), Some(9));
+        // Nothing beyond −tol: no band, whatever the zero padding past band 10.
+        assert_eq!(u.most_violated(&s, &ones, 0.8), None);
+        let feasible = padded(11, |k| values[k].abs());
+        assert_eq!(u.most_violated(&feasible, &ones, 0.0), None);
     }
 }
