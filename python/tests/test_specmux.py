@@ -85,6 +85,37 @@ def test_full_reconstruction_and_metrics(exp, sim):
         specmux.metrics(sim["truth"], sim["truth"][:, :10, :10])
 
 
+def test_a_reconstructor_built_once_gives_what_reconstruct_gives(exp, sim, cube):
+    recon = specmux.Reconstructor(exp)
+    assert recon.shape == (SIZE, SIZE)
+    assert recon.bands == cube.shape[0]
+    # Frame after frame, the experiment's method: the cube `reconstruct` gives.
+    for _ in range(2):
+        np.testing.assert_array_equal(recon(sim["frame"]), cube)
+    assert set(recon(sim["frame"], full=True)) >= {"cube", "xhat", "unmix", "seconds"}
+    # The real-time path is the Fourier method's cube, into a kept array when given one.
+    d = exp.to_dict()
+    d["reconstruct"]["gap"] = {"method": "fourier"}
+    fourier = specmux.reconstruct(specmux.Experiment.from_dict(d), sim["frame"])
+    np.testing.assert_array_equal(recon.realtime(sim["frame"]), fourier)
+    out = np.full(fourier.shape, np.nan, dtype=np.float32)
+    assert recon.realtime(sim["frame"], out=out) is out
+    np.testing.assert_array_equal(out, fourier)
+    with pytest.raises(specmux.SpecmuxError, match=f"built for {SIZE}×{SIZE}"):
+        recon(np.zeros((SIZE // 2, SIZE), np.float32))
+    with pytest.raises(specmux.SpecmuxError, match="out is"):
+        recon.realtime(sim["frame"], out=np.zeros((fourier.shape[0], SIZE, 3), np.float32))
+    strided = np.zeros((fourier.shape[0], SIZE, 2 * SIZE), np.float32)[:, :, ::2]
+    with pytest.raises(specmux.SpecmuxError, match="C-contiguous"):
+        recon.realtime(sim["frame"], out=strided)
+    with pytest.raises(specmux.SpecmuxError, match="rig.sensor"):
+        recon(sim["frame"].astype(np.uint16))
+    bad = sim["frame"].copy()
+    bad[3, 5] = np.nan
+    with pytest.raises(specmux.SpecmuxError, match=r"pixel \(5, 3\)"):
+        recon.realtime(bad)
+
+
 def test_bad_toml_names_the_key():
     with pytest.raises(specmux.SpecmuxError) as e:
         specmux.Experiment.from_toml("[scene]\nsize = [64, 64]\nno_such_key = 3\n", "bad.toml")

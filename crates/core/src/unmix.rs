@@ -404,16 +404,31 @@ impl Unmixer {
     /// [`Unmixer::unmix`] into a cube of the right size that the caller keeps from frame to
     /// frame: a real-time loop then pays for its 31 output planes' memory once.
     pub fn unmix_into(&self, xhat: &Cube, out: &mut Cube) -> Result<UnmixStats> {
+        if (out.width, out.height, out.planes) != (xhat.width, xhat.height, self.m) {
+            return Err(Error::Shape(format!(
+                "unmixing output {}×{}×{} for channels {}×{} and {} bands",
+                out.width, out.height, out.planes, xhat.width, xhat.height, self.m
+            )));
+        }
+        self.unmix_into_slice(xhat, &mut out.data)
+    }
+
+    /// [`Unmixer::unmix_into`] into the memory of a (bands, height, width) array in row-major
+    /// order, such as a numpy array a caller keeps (every value overwritten).
+    pub fn unmix_into_slice(&self, xhat: &Cube, out: &mut [f32]) -> Result<UnmixStats> {
         if xhat.planes != self.c {
             return Err(Error::Shape(format!(
                 "unmixing expects {} channel planes, the cube has {}",
                 self.c, xhat.planes
             )));
         }
-        if (out.width, out.height, out.planes) != (xhat.width, xhat.height, self.m) {
+        if out.len() != self.m * xhat.pixels() {
             return Err(Error::Shape(format!(
-                "unmixing output {}×{}×{} for channels {}×{} and {} bands",
-                out.width, out.height, out.planes, xhat.width, xhat.height, self.m
+                "unmixing output of {} values for channels {}×{} and {} bands",
+                out.len(),
+                xhat.width,
+                xhat.height,
+                self.m
             )));
         }
         let (wid, npx) = (xhat.width, xhat.pixels());
@@ -424,7 +439,7 @@ impl Unmixer {
         let nchunks = npx.div_ceil(chunk_px);
         let mut views: Vec<Vec<&mut [f32]>> =
             (0..nchunks).map(|_| Vec::with_capacity(self.m)).collect();
-        for plane in out.data.chunks_exact_mut(npx) {
+        for plane in out.chunks_exact_mut(npx) {
             for (k, part) in plane.chunks_mut(chunk_px).enumerate() {
                 views[k].push(part);
             }
@@ -1022,6 +1037,14 @@ mod tests {
             "{stats:?}"
         );
         assert!(out.data.iter().all(|&v| v >= 0.0));
+        // Into a caller's memory (a numpy array's): the same bits; a wrong length refused.
+        let mut kept = vec![f32::NAN; out.data.len()];
+        u.unmix_into_slice(&cube, &mut kept).unwrap();
+        assert!(kept
+            .iter()
+            .zip(&out.data)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(u.unmix_into_slice(&cube, &mut kept[1..]).is_err());
         let mut a = [0.0; J];
         for p in 0..w * h {
             let xp: Vec<f64> = (0..6).map(|j| cube.plane(j)[p] as f64).collect();

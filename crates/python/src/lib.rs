@@ -34,6 +34,7 @@ fn specmux(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("SpecmuxError", m.py().get_type::<error::SpecmuxError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<experiment::PyExperiment>()?;
+    m.add_class::<reconstruct::PyReconstructor>()?;
     m.add_function(wrap_pyfunction!(simulate::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate::run, m)?)?;
     m.add_function(wrap_pyfunction!(reconstruct::reconstruct, m)?)?;

@@ -1,15 +1,21 @@
 //! `reconstruct` (a cube from a frame, calibrated from the user's measured frames or the twin's
-//! captures, as `specmux reconstruct`) and `metrics` (an estimate against its truth).
+//! captures, as `specmux reconstruct`), `Reconstructor` (the same built once and applied to
+//! frame after frame, with the real-time path) and `metrics` (an estimate against its truth).
 
 use crate::calibration;
 use crate::convert::{cube_array, is_integer, kept, library, to_cube, to_frame, to_py};
 use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
+use numpy::{PyArray3, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::exceptions::PyUserWarning;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use specmux_core::reconstructor::Reconstructor;
+use specmux_core::calibration::{Calibration, CalibrationFrames};
+use specmux_core::reconstructor::{Reconstruction, Reconstructor};
+use specmux_core::spectral::Library;
+use specmux_core::Cube;
 use specmux_report::commands::{frame_calibration, frame_experiment, size_note, Measured};
+use specmux_twin::experiment::Experiment;
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
 use std::ffi::CString;
@@ -51,22 +57,50 @@ pub fn reconstruct<'py>(
         .transpose()?;
     let lib = library(spectra);
     let (out, cal, snr, warnings) = interruptible(py, move || -> specmux_core::Result<_> {
-        let materials = Materials::load(&lib)?;
-        let rig = Rig::build(&e, &lib, &materials)?;
-        let measured = measured.as_ref().map(|frames| Measured {
-            frames,
-            place: "reconstruct",
-            key: "calibration",
-        });
-        let cache = kept()?;
-        let cal = frame_calibration(&e, &rig, &materials, measured, Some(&cache))?;
-        let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
+        let (recon, cal) = calibrated(&e, measured.as_ref(), &lib)?;
         let snr = recon.frame_snr(&frame)?;
         Ok((recon.run(&frame, None)?, cal, snr, recon.warnings(snr)))
     })?
     .map_err(err)?;
+    result(py, out, &cal, snr, &warnings, full)
+}
+
+/// The rig's reconstructor for experiment `e` (its frame size set), calibrated from the user's
+/// `measured` frames or, without them, the twin's captures of the rig.
+fn calibrated(
+    e: &Experiment,
+    measured: Option<&CalibrationFrames>,
+    lib: &Library,
+) -> specmux_core::Result<(Reconstructor, Calibration)> {
+    let materials = Materials::load(lib)?;
+    let rig = Rig::build(e, lib, &materials)?;
+    let measured = measured.map(|frames| Measured {
+        frames,
+        place: "reconstruct",
+        key: "calibration",
+    });
+    let cal = frame_calibration(e, &rig, &materials, measured, Some(&kept()?))?;
+    let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
+    Ok((recon, cal))
+}
+
+/// What `reconstruct` returns: the cube, or with `full` the dict of every step; the warnings
+/// raised as `UserWarning`s first.
+fn result<'py>(
+    py: Python<'py>,
+    out: Reconstruction,
+    cal: &Calibration,
+    snr: Option<f64>,
+    warnings: &[String],
+    full: bool,
+) -> PyResult<Bound<'py, PyAny>> {
     for w in warnings {
-        PyErr::warn(py, &py.get_type::<PyUserWarning>(), &CString::new(w)?, 1)?;
+        PyErr::warn(
+            py,
+            &py.get_type::<PyUserWarning>(),
+            &CString::new(w.as_str())?,
+            1,
+        )?;
     }
     if !full {
         return Ok(cube_array(py, out.cube)?.into_any());
@@ -85,6 +119,147 @@ pub fn reconstruct<'py>(
     d.set_item("xhat", cube_array(py, out.xhat)?)?;
     d.set_item("xgap", cube_array(py, out.xgap)?)?;
     Ok(d.into_any())
+}
+
+/// A reconstructor built once for an experiment's rig and its frame size (`scene.size`), then
+/// applied to frame after frame, as a camera loop does: `Reconstructor(exp, calibration=None)`
+/// calibrates as `reconstruct` does (from the dict of measured frames, or the twin's captures);
+/// calling it on a frame gives what `reconstruct(exp, frame)` gives, without building the rig,
+/// the calibration and the factorisations again; `realtime(frame, out=None)` runs the real-time
+/// path (demultiplexing and the exact non-negative unmixing, no de-aliasing) into cubes it keeps,
+/// writing the bands into `out` when given. The GIL is released while either runs.
+#[pyclass(name = "Reconstructor", module = "specmux")]
+pub struct PyReconstructor {
+    exp: Experiment,
+    recon: Reconstructor,
+    cal: Calibration,
+    /// The channels of the last `realtime` frame, kept for the next.
+    channels: Cube,
+}
+
+#[pymethods]
+impl PyReconstructor {
+    #[new]
+    #[pyo3(signature = (exp, calibration = None, spectra = None))]
+    fn new(
+        py: Python<'_>,
+        exp: &PyExperiment,
+        calibration: Option<&Bound<'_, PyAny>>,
+        spectra: Option<PathBuf>,
+    ) -> PyResult<Self> {
+        let e = exp.inner.clone();
+        let [w, h] = e.scene.size;
+        let measured = calibration
+            .map(|c| calibration::from_dict(c, w, h))
+            .transpose()?;
+        let lib = library(spectra);
+        let (recon, cal) =
+            interruptible(py, || calibrated(&e, measured.as_ref(), &lib))?.map_err(err)?;
+        let warnings = recon.warnings(None);
+        for w in &warnings {
+            PyErr::warn(
+                py,
+                &py.get_type::<PyUserWarning>(),
+                &CString::new(w.as_str())?,
+                1,
+            )?;
+        }
+        let channels = Cube::zeros(w, h, recon.demux.windows.len());
+        Ok(PyReconstructor {
+            exp: e,
+            recon,
+            cal,
+            channels,
+        })
+    }
+
+    /// (height, width) of the frames it takes.
+    #[getter]
+    fn shape(&self) -> (usize, usize) {
+        (self.channels.height, self.channels.width)
+    }
+
+    /// Bands of the cubes it returns.
+    #[getter]
+    fn bands(&self) -> usize {
+        self.recon.unmixer.bands()
+    }
+
+    /// The cube of `frame` by the experiment's method, as `reconstruct(exp, frame, full=…)`.
+    #[pyo3(signature = (frame, full = false))]
+    fn __call__<'py>(
+        &self,
+        py: Python<'py>,
+        frame: &Bound<'py, PyAny>,
+        full: bool,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let frame = self.frame(frame)?;
+        let recon = &self.recon;
+        let (out, snr) = interruptible(py, || -> specmux_core::Result<_> {
+            let snr = recon.frame_snr(&frame)?;
+            Ok((recon.run(&frame, None)?, snr))
+        })?
+        .map_err(err)?;
+        let warnings = recon.warnings(snr);
+        result(py, out, &self.cal, snr, &warnings, full)
+    }
+
+    /// The real-time path on `frame`: demultiplexing and the exact non-negative unmixing (the
+    /// cube of `method = "fourier"`), the channels in a cube this reconstructor keeps. Returns the
+    /// bands (bands, height, width) float32, unmixed straight into `out` when it is given (a
+    /// C-contiguous float32 array of that shape, so the loop allocates nothing), else into a new
+    /// array.
+    #[pyo3(signature = (frame, out = None))]
+    fn realtime<'py>(
+        &mut self,
+        py: Python<'py>,
+        frame: &Bound<'py, PyAny>,
+        out: Option<Bound<'py, PyArray3<f32>>>,
+    ) -> PyResult<Bound<'py, PyArray3<f32>>> {
+        let frame = self.frame(frame)?;
+        let (h, w) = self.shape();
+        let shape = [self.recon.unmixer.bands(), h, w];
+        let out = match out {
+            Some(a) if a.shape() != shape => {
+                return Err(err(format!(
+                    "realtime: out is {:?}, the cube is {shape:?} (bands, height, width)",
+                    a.shape()
+                )))
+            }
+            Some(a) => a,
+            None => PyArray3::zeros(py, shape, false),
+        };
+        let mut view = out.try_readwrite().map_err(err)?;
+        let dst = view
+            .as_slice_mut()
+            .map_err(|_| err("realtime: out must be a C-contiguous float32 array"))?;
+        let (recon, channels) = (&self.recon, &mut self.channels);
+        py.detach(|| -> specmux_core::Result<()> {
+            recon.demultiplex_into(&frame, channels)?;
+            recon.unmixer.unmix_into_slice(channels, dst).map(|_| ())
+        })
+        .map_err(err)?;
+        drop(view);
+        Ok(out)
+    }
+}
+
+impl PyReconstructor {
+    /// `frame` as a frame of this reconstructor's size, finite; an integer (raw DN) frame needs
+    /// the experiment's camera, as in `reconstruct`.
+    fn frame(&self, frame: &Bound<'_, PyAny>) -> PyResult<Cube> {
+        let raw_dn = is_integer(frame)?.then_some("frame (an integer array) is raw DN");
+        let f = to_frame(frame, "frame", None)?;
+        let (w, h) = (self.channels.width, self.channels.height);
+        if (f.width, f.height) != (w, h) {
+            return Err(err(format!(
+                "frame: {}×{}, this reconstructor was built for {w}×{h} ({}: scene.size)",
+                f.width, f.height, self.exp.file
+            )));
+        }
+        frame_experiment(&self.exp, &f, raw_dn).map_err(err)?;
+        Ok(f)
+    }
 }
 
 /// PSNR (dB), SSIM, RMSE, NRMSE and SAM (degrees) of an estimate against its truth, both
