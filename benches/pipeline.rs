@@ -3,8 +3,8 @@
 //! runs on them), on the smooth CAVE-like scene the paper's figures describe, and on the full
 //! rig of `scenes/full-rig.toml` (noisy raw frame, dark/flat correction, calibrated patterns,
 //! the exposure's crosstalk undone); with a fresh output cube per frame and with one kept from
-//! frame to frame. Throughput is one frame per
-//! iteration, so criterion's "thrpt" is in frames/s; the rayon thread count is printed.
+//! frame to frame. Throughput is one frame per iteration, so criterion's "thrpt" is in frames/s;
+//! the rayon thread count is printed. Run from the repository's root (as `cargo bench` does).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use specmux_core::spectral::Library;
@@ -35,7 +35,7 @@ fn bench(c: &mut Criterion) {
         ),
     ];
     for (name, exp) in scenes {
-        let rig = Rig::build(&exp, &lib, &materials).expect("prototype rig");
+        let rig = Rig::build(&exp, &lib, &materials).expect("the scene's rig");
         let (state, _) = Pipeline::build(&exp, &rig, &materials)
             .unwrap()
             .run()

@@ -49,7 +49,7 @@ pub fn reconstruct<'py>(
     let raw_dn = is_integer(frame)?.then_some("frame (an integer array) is raw DN");
     let frame = to_frame(frame, "frame", None)?;
     if let Some(w) = size_note(&exp.inner, &frame) {
-        PyErr::warn(py, &py.get_type::<PyUserWarning>(), &CString::new(w)?, 1)?;
+        warn(py, &[w])?;
     }
     let e = frame_experiment(&exp.inner, &frame, raw_dn).map_err(err)?;
     let measured = calibration
@@ -94,14 +94,7 @@ fn result<'py>(
     warnings: &[String],
     full: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    for w in warnings {
-        PyErr::warn(
-            py,
-            &py.get_type::<PyUserWarning>(),
-            &CString::new(w.as_str())?,
-            1,
-        )?;
-    }
+    warn(py, warnings)?;
     if !full {
         return Ok(cube_array(py, out.cube)?.into_any());
     }
@@ -121,13 +114,27 @@ fn result<'py>(
     Ok(d.into_any())
 }
 
+/// Each warning raised as a `UserWarning`.
+fn warn(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
+    for w in warnings {
+        PyErr::warn(
+            py,
+            &py.get_type::<PyUserWarning>(),
+            &CString::new(w.as_str())?,
+            1,
+        )?;
+    }
+    Ok(())
+}
+
 /// A reconstructor built once for an experiment's rig and its frame size (`scene.size`), then
 /// applied to frame after frame, as a camera loop does: `Reconstructor(exp, calibration=None)`
 /// calibrates as `reconstruct` does (from the dict of measured frames, or the twin's captures);
 /// calling it on a frame gives what `reconstruct(exp, frame)` gives, without building the rig,
 /// the calibration and the factorisations again; `realtime(frame, out=None)` runs the real-time
-/// path (demultiplexing and the exact non-negative unmixing, no de-aliasing) into cubes it keeps,
-/// writing the bands into `out` when given. The GIL is released while either runs.
+/// path (demultiplexing and the exact non-negative unmixing, no de-aliasing), the channels in a
+/// cube it keeps and the bands straight into `out` when given. The GIL is released while either
+/// runs.
 #[pyclass(name = "Reconstructor", module = "specmux")]
 pub struct PyReconstructor {
     exp: Experiment,
@@ -155,15 +162,7 @@ impl PyReconstructor {
         let lib = library(spectra);
         let (recon, cal) =
             interruptible(py, || calibrated(&e, measured.as_ref(), &lib))?.map_err(err)?;
-        let warnings = recon.warnings(None);
-        for w in &warnings {
-            PyErr::warn(
-                py,
-                &py.get_type::<PyUserWarning>(),
-                &CString::new(w.as_str())?,
-                1,
-            )?;
-        }
+        warn(py, &recon.warnings(None))?;
         let channels = Cube::zeros(w, h, recon.demux.windows.len());
         Ok(PyReconstructor {
             exp: e,
@@ -257,7 +256,9 @@ impl PyReconstructor {
                 f.width, f.height, self.exp.file
             )));
         }
-        frame_experiment(&self.exp, &f, raw_dn).map_err(err)?;
+        if raw_dn.is_some() {
+            frame_experiment(&self.exp, &f, raw_dn).map_err(err)?;
+        }
         Ok(f)
     }
 }

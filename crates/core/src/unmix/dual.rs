@@ -102,13 +102,7 @@ impl Unmixer {
         info: &mut SolveInfo,
     ) -> Result<()> {
         let (n, m) = (self.n, self.m);
-        let scale = fold8(&s[..padded_len(m)], 0.0, |a, x| {
-            if x.abs() > a {
-                x.abs()
-            } else {
-                a
-            }
-        });
+        let scale = fold8(&s[..padded_len(m)], 0.0, larger_magnitude);
         let tol = 1e-12 * scale;
         let mut ws = WorkingSet {
             l: [[0.0; MAX_BASIS]; MAX_BASIS],
@@ -288,6 +282,16 @@ pub(super) fn fold8(values: &[f64], init: f64, pick: impl Fn(f64, f64) -> f64 + 
 #[inline(always)]
 pub(super) fn padded_len(m: usize) -> usize {
     m.next_multiple_of(BAND_BLOCK)
+}
+
+/// |x| where it is above `a`, else `a` (a NaN `x` is passed over): the largest magnitude.
+#[inline(always)]
+fn larger_magnitude(a: f64, x: f64) -> f64 {
+    if x.abs() > a {
+        x.abs()
+    } else {
+        a
+    }
 }
 
 /// The lower of two values; a NaN `x` is passed over.
