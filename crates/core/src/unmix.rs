@@ -382,7 +382,7 @@ impl Unmixer {
 
     /// Accept the active set's result: α finite and every band value r ≥ −1e-9·scale.
     fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
-        let worst = dual::fold8(&r[..dual::padded_len(self.m)], 0.0, dual::lower);
+        let worst = dual::fold8(&r[..padded_len(self.m)], 0.0, dual::lower);
         if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
                 "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"
@@ -627,6 +627,13 @@ impl Unmixer {
 /// The `m` band values `value(k)`, zero-padded to `MAX_BANDS` (the solver's per-band arrays).
 fn padded(m: usize, value: impl Fn(usize) -> f64) -> [f64; MAX_BANDS] {
     std::array::from_fn(|k| if k < m { value(k) } else { 0.0 })
+}
+
+/// The bands rounded up to whole eight-band blocks: the solver's arrays hold 0 past `m`
+/// (zero-padded tables), which no extreme it takes over them can pick.
+#[inline(always)]
+fn padded_len(m: usize) -> usize {
+    m.next_multiple_of(BAND_BLOCK)
 }
 
 /// Bands eight at a time: each block's range and its values in `s` (zero-padded past the last

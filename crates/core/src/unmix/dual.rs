@@ -12,6 +12,7 @@
 use crate::error::Error;
 use crate::error::Result;
 use crate::unmix::band_blocks;
+use crate::unmix::padded_len;
 use crate::unmix::SolveInfo;
 use crate::unmix::Unmixer;
 use crate::unmix::BAND_BLOCK;
@@ -275,13 +276,6 @@ pub(super) fn fold8(values: &[f64], init: f64, pick: impl Fn(f64, f64) -> f64 + 
         }
     }
     lanes.into_iter().fold(init, pick)
-}
-
-/// The bands rounded up to whole eight-band blocks: the solver's arrays hold 0 past `m`
-/// (zero-padded tables), which no extreme it takes over them can pick.
-#[inline(always)]
-pub(super) fn padded_len(m: usize) -> usize {
-    m.next_multiple_of(BAND_BLOCK)
 }
 
 /// |x| where it is above `a`, else `a` (a NaN `x` is passed over): the largest magnitude.
