@@ -129,7 +129,9 @@ pub struct UnmixStats {
     pub constrained_pixels: usize,
     /// Of those, pixels where the non-negativity bound is active at the solution.
     pub bound_pixels: usize,
+    /// Active-set steps of one pixel, at most (each band a warm start drops counts as one).
     pub max_iterations: usize,
+    /// Active-set steps over the cube.
     pub total_iterations: usize,
 }
 
@@ -353,17 +355,27 @@ impl Unmixer {
             )));
         }
         let mut r = [0.0; MAX_BANDS];
-        self.solve(xhat, out_alpha, &mut r)
+        let (info, au) = self.solve(xhat, &mut r, &mut dual::WorkingSet::empty())?;
+        let alpha = self.alpha_from(&au, &info);
+        if let Some(v) = alpha[..self.n].iter().find(|v| !v.is_finite()) {
+            return Err(Error::Numerical(format!(
+                "unmixing active set ended with a coefficient of {v}"
+            )));
+        }
+        out_alpha.copy_from_slice(&alpha[..self.n]);
+        Ok(info)
     }
 
-    /// [`Unmixer::solve_pixel`] on checked input, also writing the band values r = Bα (to the
-    /// solver's round-off; the bands it holds at zero exactly 0).
+    /// [`Unmixer::solve_pixel`]'s work on checked input: writes the band values r = Bα (to the
+    /// solver's round-off; the bands it holds at zero exactly 0) and returns how the pixel was
+    /// solved with its unconstrained minimiser α_u; a constrained pixel's dual method starts from
+    /// the working set `start` and leaves its final set there.
     fn solve(
         &self,
         xhat: &[f64],
-        out_alpha: &mut [f64],
         r: &mut [f64; MAX_BANDS],
-    ) -> Result<SolveInfo> {
+        start: &mut dual::WorkingSet,
+    ) -> Result<(SolveInfo, [f64; MAX_BASIS])> {
         let au = self.unconstrained_alpha(xhat);
         self.spectrum(&au[..self.n], r);
         let mut info = SolveInfo {
@@ -373,17 +385,33 @@ impl Unmixer {
             multipliers: [0.0; MAX_BASIS],
         };
         if r[..self.m].iter().all(|&v| v >= 0.0) {
-            out_alpha.copy_from_slice(&au[..self.n]);
-            return Ok(info);
+            return Ok((info, au));
         }
-        self.dual_active_set(&au, r, out_alpha, &mut info)?;
-        Ok(info)
+        self.dual_active_set(r, &mut info, start)?;
+        Ok((info, au))
     }
 
-    /// Accept the active set's result: α finite and every band value r ≥ −1e-9·scale.
-    fn check_feasible(&self, alpha: &[f64], r: &[f64], scale: f64) -> Result<()> {
+    /// α = α_u + Σ μ_k H⁻¹b_kᵀ over the final working set (0 when all J coefficients are
+    /// pinned).
+    fn alpha_from(&self, au: &[f64; MAX_BASIS], info: &SolveInfo) -> [f64; MAX_BASIS] {
+        let n = self.n;
+        if info.active == n {
+            return [0.0; MAX_BASIS];
+        }
+        let mut alpha = *au;
+        for (&band, &mu) in info.active_bands().iter().zip(info.multipliers()) {
+            let col = &self.hinv_bt[band * n..(band + 1) * n];
+            for (a, c) in alpha[..n].iter_mut().zip(col) {
+                *a += mu * c;
+            }
+        }
+        alpha
+    }
+
+    /// Accept the active set's result: every band value r finite and ≥ −1e-9·scale.
+    fn check_feasible(&self, r: &[f64], scale: f64) -> Result<()> {
         let worst = dual::fold8(&r[..padded_len(self.m)], 0.0, dual::lower);
-        if !(worst >= -1e-9 * scale) || alpha[..self.n].iter().any(|v| !v.is_finite()) {
+        if !(worst >= -1e-9 * scale) || r[..self.m].iter().any(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
                 "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"
             )));
@@ -511,12 +539,15 @@ impl Unmixer {
     ) -> std::result::Result<(), (usize, String)> {
         let len = xs[0].len();
         let mut block: Block = [[0.0; LINE]; MAX_BANDS];
+        // The last solved pixel's final working set, the next one's start (in the chunk only, so
+        // the result does not depend on how the threads split the cube).
+        let mut warm = dual::WorkingSet::empty();
         // The first band's lines begin where (offset + pixel) is a multiple of LINE.
         let offset = bands[0].as_ptr() as usize / 4 % LINE;
         let mut start = 0;
         while start < len {
             let end = (((offset + start) / LINE + 1) * LINE - offset).min(len);
-            self.unmix_block(xs, start, end - start, &mut block, stats)?;
+            self.unmix_block(xs, start, end - start, &mut block, &mut warm, stats)?;
             for (out, b) in bands.iter_mut().zip(&block) {
                 store_line(&mut out[start..end], &b[..end - start]);
             }
@@ -526,7 +557,8 @@ impl Unmixer {
     }
 
     /// The bands of the `lanes` ≤ 16 pixels from `start` into `block`: projected eight pixels
-    /// at a time, then each pixel with a negative band solved exactly.
+    /// at a time, then each pixel with a negative band solved exactly, starting from the working
+    /// set `warm` that the last one left.
     #[inline(always)]
     fn unmix_block(
         &self,
@@ -534,6 +566,7 @@ impl Unmixer {
         start: usize,
         lanes: usize,
         block: &mut Block,
+        warm: &mut dual::WorkingSet,
         stats: &mut UnmixStats,
     ) -> std::result::Result<(), (usize, String)> {
         let mut low = [f32::INFINITY; LINE];
@@ -552,29 +585,29 @@ impl Unmixer {
             .enumerate()
             .filter(|(_, &v)| !(v >= 0.0))
         {
-            self.solve_lane(xs, start + l, block, l, stats)
+            self.solve_lane(xs, start + l, block, l, warm, stats)
                 .map_err(|e| (start + l, e.to_string()))?;
         }
         Ok(())
     }
 
-    /// The exact solution of pixel `i`, written into lane `l` of `block` (bands r ≥ 0 times
-    /// their gains), and counted in `stats`.
+    /// The exact solution of pixel `i` from the working set `warm`, written into lane `l` of
+    /// `block` (bands r ≥ 0 times their gains), and counted in `stats`.
     fn solve_lane(
         &self,
         xs: &[&[f32]],
         i: usize,
         block: &mut Block,
         l: usize,
+        warm: &mut dual::WorkingSet,
         stats: &mut UnmixStats,
     ) -> Result<()> {
         let mut xp = [0.0f64; MAX_CHANNELS];
         for (xv, x) in xp.iter_mut().zip(xs) {
             *xv = x[i] as f64;
         }
-        let mut alpha = [0.0f64; MAX_BASIS];
         let mut r = [0.0f64; MAX_BANDS];
-        let info = self.solve(&xp[..self.c], &mut alpha[..self.n], &mut r)?;
+        let (info, _) = self.solve(&xp[..self.c], &mut r, warm)?;
         for ((b, &v), g) in block.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
             b[l] = (v.max(0.0) * g) as f32;
         }
@@ -872,6 +905,31 @@ mod tests {
         info
     }
 
+    /// Solve `x` from the working set `warm` (the previous pixel's final set, as a cube's pixels
+    /// are solved) and from the empty one: the minimiser is unique, so the band values must
+    /// agree to the solver's own feasibility tolerance (10⁻⁹ of the pixel's largest band), with
+    /// the warm start's multipliers ≥ 0 and its working set's bands exactly 0. Returns the
+    /// steps of the two (empty start, warm start).
+    fn check_warm_start(u: &Unmixer, x: &[f64], warm: &mut dual::WorkingSet) -> [usize; 2] {
+        let (mut cold, mut warmed) = ([0.0; MAX_BANDS], [0.0; MAX_BANDS]);
+        let (cold_info, _) = u
+            .solve(x, &mut cold, &mut dual::WorkingSet::empty())
+            .unwrap();
+        let (info, _) = u.solve(x, &mut warmed, warm).unwrap();
+        let scale = cold.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
+        for k in 0..BANDS {
+            assert!(
+                (warmed[k] - cold[k]).abs() <= 1e-9 * scale,
+                "band {k}: {} warm, {} cold (scale {scale:e})",
+                warmed[k],
+                cold[k]
+            );
+        }
+        assert!(info.multipliers().iter().all(|&mu| mu >= 0.0), "{info:?}");
+        assert!(info.active_bands().iter().all(|&k| warmed[k] == 0.0));
+        [cold_info.iterations, info.iterations]
+    }
+
     fn normal(rng: &mut Pcg64) -> f64 {
         StandardNormal.sample(rng)
     }
@@ -961,16 +1019,22 @@ mod tests {
             "not ill-conditioned: {:e}",
             u1.condition()
         );
-        let mut cases = 0;
+        let (mut cases, mut shorter) = (0, 0);
         for (f, eta) in [(&f1, 1e-4), (&f0, 0.0), (&f0, 1e4)] {
+            // Each pixel also solved from the previous one's final working set.
+            let u = Unmixer::new(f, &b, eta).unwrap();
+            let mut warm = dual::WorkingSet::empty();
             for _ in 0..60 {
                 // Large negative parts: many bands bind, often the vertex α = 0.
                 let x: Vec<f64> = (0..6).map(|_| normal(&mut rng) - 0.7).collect();
                 check_against_clarabel(f, &b, eta, &x, 1e-5);
+                let [cold, warmed] = check_warm_start(&u, &x, &mut warm);
+                shorter += (warmed < cold) as usize;
                 cases += 1;
             }
         }
         assert_eq!(cases, 180);
+        assert!(shorter >= 30, "{shorter} warm starts saved a step");
     }
 
     #[test]
