@@ -907,16 +907,19 @@ mod tests {
 
     /// Solve `x` from the working set `warm` (the previous pixel's final set, as a cube's pixels
     /// are solved) and from the empty one: the minimiser is unique, so the band values must
-    /// agree to the solver's own feasibility tolerance (10⁻⁹ of the pixel's largest band), with
-    /// the warm start's multipliers ≥ 0 and its working set's bands exactly 0. Returns the
-    /// steps of the two (empty start, warm start).
+    /// agree to the solver's own feasibility tolerance (10⁻⁹ of the pixel's largest
+    /// unconstrained band), with the warm start's multipliers ≥ 0 and its working set's bands
+    /// exactly 0. Returns the steps of the two (empty start, warm start).
     fn check_warm_start(u: &Unmixer, x: &[f64], warm: &mut dual::WorkingSet) -> [usize; 2] {
         let (mut cold, mut warmed) = ([0.0; MAX_BANDS], [0.0; MAX_BANDS]);
         let (cold_info, _) = u
             .solve(x, &mut cold, &mut dual::WorkingSet::empty())
             .unwrap();
         let (info, _) = u.solve(x, &mut warmed, warm).unwrap();
-        let scale = cold.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
+        // The solver's own scale: the largest unconstrained band value (`dual_active_set`).
+        let mut unconstrained = [0.0; MAX_BANDS];
+        u.spectrum(&u.unconstrained_alpha(x)[..u.n], &mut unconstrained);
+        let scale = unconstrained.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for k in 0..BANDS {
             assert!(
                 (warmed[k] - cold[k]).abs() <= 1e-9 * scale,

@@ -4,8 +4,8 @@
 //! negative, so a pixel with k binding bands takes about k steps. It runs in band space: with
 //! G = B H⁻¹ Bᵀ the step moves the band values by G_·p − G_·A G_AA⁻¹ G_Ap and the multipliers by
 //! G_AA⁻¹ G_Ap, so a step costs two small triangular solves and one pass over the bands, and
-//! G_AA = LLᵀ gains a row per added band (one square root) where the factorisation J = L⁻ᵀQ of
-//! the textbook method needs a Givens rotation per free direction. The band values are those the
+//! G_AA = LDLᵀ gains a row per added band where the factorisation J = L⁻ᵀQ of the textbook
+//! method needs a Givens rotation per free direction (a square root and a division each). The band values are those the
 //! steps carried (B α to round-off, the working set's exactly 0), not B α formed again (186
 //! multiply-adds, 5 % of the real-time path; docs/speed.md), and α = α_u + H⁻¹B_Aᵀμ is formed
 //! only where it is asked for (`Unmixer::solve_pixel`). A pixel of a cube starts from the
@@ -28,12 +28,15 @@ type Vector = [f64; MAX_BASIS];
 /// active ones): G_pp − G_pA G_AA⁻¹ G_Ap ≤ DEPENDENT·G_pp.
 const DEPENDENT: f64 = 1e-13;
 
-/// The working set: its bands, their multipliers and the Cholesky factor of G_AA. A pixel's
-/// final set is the next pixel's start (`Unmixer::dual_active_set`).
+/// The working set: its bands, their multipliers and the factor G_AA = L D Lᵀ (L unit lower
+/// triangular): its solves divide only by D, off the chain of dependent multiply-adds that the
+/// Cholesky factor's divisions by its diagonal were on. A pixel's final set is the next pixel's
+/// start (`Unmixer::dual_active_set`).
 #[derive(Clone, Copy)]
 pub(super) struct WorkingSet {
-    /// L, lower triangular q × q, row-major: `l[i][k]`, k ≤ i.
+    /// L below its unit diagonal, q × q, row-major: `l[i][k]`, k < i.
     l: [Vector; MAX_BASIS],
+    d: Vector,
     bands: [usize; MAX_BASIS],
     mu: Vector,
     q: usize,
@@ -44,62 +47,67 @@ impl WorkingSet {
     pub(super) fn empty() -> WorkingSet {
         WorkingSet {
             l: [[0.0; MAX_BASIS]; MAX_BASIS],
+            d: [0.0; MAX_BASIS],
             bands: [0; MAX_BASIS],
             mu: [0.0; MAX_BASIS],
             q: 0,
         }
     }
 
-    /// r = G_AA⁻¹ g given g = G_Ap, and y = L⁻¹g (the new row of L if p is added).
-    fn solve(&self, g: &Vector) -> (Vector, Vector) {
+    /// r = G_AA⁻¹ g given g = G_Ap, y = L⁻¹g and z = D⁻¹y (the new row of L if p is added).
+    fn solve(&self, g: &Vector) -> (Vector, Vector, Vector) {
         let q = self.q;
         let mut y = [0.0; MAX_BASIS];
         for i in 0..q {
             let acc: f64 = (0..i).map(|k| self.l[i][k] * y[k]).sum();
-            y[i] = (g[i] - acc) / self.l[i][i];
+            y[i] = g[i] - acc;
         }
+        let z: Vector = std::array::from_fn(|i| if i < q { y[i] / self.d[i] } else { 0.0 });
         let mut r = [0.0; MAX_BASIS];
         for i in (0..q).rev() {
             let acc: f64 = (i + 1..q).map(|k| self.l[k][i] * r[k]).sum();
-            r[i] = (y[i] - acc) / self.l[i][i];
+            r[i] = z[i] - acc;
         }
-        (r, y)
+        (r, y, z)
     }
 
-    /// Add band `band` with multiplier `mu`: L's new row is y and √schur.
-    fn add(&mut self, band: usize, mu: f64, y: &Vector, schur: f64) {
+    /// Add band `band` with multiplier `mu`: L's new row is z, D's new entry the Schur complement.
+    fn add(&mut self, band: usize, mu: f64, z: &Vector, schur: f64) {
         let q = self.q;
-        self.l[q][..q].copy_from_slice(&y[..q]);
-        self.l[q][q] = schur.sqrt();
+        self.l[q][..q].copy_from_slice(&z[..q]);
+        self.d[q] = schur;
         self.bands[q] = band;
         self.mu[q] = mu;
         self.q += 1;
     }
 
-    /// Drop the band at position `at`: remove L's row, then Givens rotations of the columns
-    /// (which keep LLᵀ) restore the triangle.
+    /// Drop the band at position `at`: remove its row and column of L and D, whose part below
+    /// and right of it, d_at·w wᵀ with w the removed column, goes back into the trailing factor
+    /// by a rank-one update (Gill, Golub, Murray & Saunders 1974, method C1).
     fn drop(&mut self, at: usize) {
         let q = self.q;
+        let mut w: Vector =
+            std::array::from_fn(|i| if at < i && i < q { self.l[i][at] } else { 0.0 });
+        let mut a = self.d[at];
         for i in at..q - 1 {
-            self.l[i] = self.l[i + 1];
             self.bands[i] = self.bands[i + 1];
             self.mu[i] = self.mu[i + 1];
+            self.d[i] = self.d[i + 1];
+            w[i] = w[i + 1];
+            let row = self.l[i + 1];
+            self.l[i][..at].copy_from_slice(&row[..at]);
+            self.l[i][at..i].copy_from_slice(&row[at + 1..i + 1]);
         }
-        for i in at..q - 1 {
-            let (x, y) = (self.l[i][i], self.l[i][i + 1]);
-            let h = (x * x + y * y).sqrt();
-            if !(h > 0.0) {
-                continue;
+        for j in at..q - 1 {
+            let p = w[j];
+            let dj = self.d[j] + a * p * p;
+            let beta = p * a / dj;
+            a *= self.d[j] / dj;
+            self.d[j] = dj;
+            for i in j + 1..q - 1 {
+                w[i] -= p * self.l[i][j];
+                self.l[i][j] += beta * w[i];
             }
-            let (c, s) = (x / h, y / h);
-            for row in &mut self.l[i..q - 1] {
-                let (a, b) = (row[i], row[i + 1]);
-                row[i] = c * a + s * b;
-                row[i + 1] = c * b - s * a;
-            }
-        }
-        for row in &mut self.l[..q - 1] {
-            row[q - 1] = 0.0;
         }
         self.q -= 1;
     }
@@ -139,8 +147,8 @@ impl Unmixer {
                 }
                 let q = ws.q;
                 let g: Vector = std::array::from_fn(|i| if i < q { gp[ws.bands[i]] } else { 0.0 });
-                let (r, y) = ws.solve(&g);
-                let schur = gp[p] - y[..q].iter().map(|v| v * v).sum::<f64>();
+                let (r, y, z) = ws.solve(&g);
+                let schur = gp[p] - y[..q].iter().zip(&z).map(|(y, z)| y * z).sum::<f64>();
                 // Partial step: the first active multiplier to reach zero.
                 let mut t1 = f64::INFINITY;
                 let mut drop = None;
@@ -184,7 +192,7 @@ impl Unmixer {
                         ws.drop(k);
                     }
                     None => {
-                        ws.add(p, mu_p, &y, schur);
+                        ws.add(p, mu_p, &z, schur);
                         weight[p] = 0.0;
                         break;
                     }
@@ -223,7 +231,7 @@ impl Unmixer {
         while ws.q > 0 {
             let q = ws.q;
             let g: Vector = std::array::from_fn(|i| if i < q { -s[ws.bands[i]] } else { 0.0 });
-            let (mu, _) = ws.solve(&g);
+            let (mu, _, _) = ws.solve(&g);
             if mu[..q].iter().all(|&v| !(v < 0.0)) {
                 ws.mu = mu;
                 break;
@@ -350,5 +358,98 @@ mod tests {
         assert_eq!(u.most_violated(&s, &ones, 0.8), None);
         let feasible = padded(11, |k| values[k].abs());
         assert_eq!(u.most_violated(&feasible, &ones, 0.0), None);
+    }
+
+    /// The factor after adding `bands` one by one as the method does (row z, Schur complement).
+    fn factored(u: &Unmixer, bands: &[usize]) -> WorkingSet {
+        let mut ws = WorkingSet::empty();
+        for &p in bands {
+            let g: Vector = std::array::from_fn(|i| {
+                if i < ws.q {
+                    u.g_bands[p][ws.bands[i]]
+                } else {
+                    0.0
+                }
+            });
+            let (_, y, z) = ws.solve(&g);
+            let schur = u.g_bands[p][p] - y[..ws.q].iter().zip(&z).map(|(y, z)| y * z).sum::<f64>();
+            ws.add(p, 0.0, &z, schur);
+        }
+        ws
+    }
+
+    /// Largest |L D Lᵀ − G_AA| over the working set's bands, relative to G's largest entry.
+    fn factor_error(u: &Unmixer, ws: &WorkingSet) -> f64 {
+        let q = ws.q;
+        let l = |i: usize, k: usize| match k.cmp(&i) {
+            std::cmp::Ordering::Less => ws.l[i][k],
+            std::cmp::Ordering::Equal => 1.0,
+            std::cmp::Ordering::Greater => 0.0,
+        };
+        let gmax = u
+            .g_bands
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        let mut worst = 0.0f64;
+        for i in 0..q {
+            for j in 0..q {
+                let ldl: f64 = (0..q).map(|k| l(i, k) * ws.d[k] * l(j, k)).sum();
+                worst = worst.max((ldl - u.g_bands[ws.bands[i]][ws.bands[j]]).abs() / gmax);
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn adding_and_dropping_bands_keeps_the_factor_of_the_working_sets_block() {
+        // 31 bands, J = 6 polynomial basis vectors: any six distinct bands are independent.
+        let b = DMatrix::from_fn(31, 6, |k, j| (k as f64 / 30.0 - 0.5).powi(j as i32));
+        let u = Unmixer::new(&DMatrix::identity(6, 6), &b, 0.0).unwrap();
+        let bands = [3, 17, 8, 29, 0, 12];
+        let full = factored(&u, &bands);
+        assert!(
+            factor_error(&u, &full) <= 1e-13,
+            "{:e}",
+            factor_error(&u, &full)
+        );
+        // Each position dropped, then a second one: the rest keep their order and their factor.
+        for at in 0..6 {
+            let mut ws = full;
+            ws.drop(at);
+            let mut rest = bands.to_vec();
+            rest.remove(at);
+            assert_eq!(&ws.bands[..5], &rest[..]);
+            assert!(
+                factor_error(&u, &ws) <= 1e-13,
+                "drop {at}: {:e}",
+                factor_error(&u, &ws)
+            );
+            ws.drop(at.min(3));
+            assert_eq!(ws.q, 4);
+            assert!(
+                factor_error(&u, &ws) <= 1e-13,
+                "{:e}",
+                factor_error(&u, &ws)
+            );
+        }
+        // A dropped band added back solves as before: G_AA r = g to round-off.
+        let mut ws = full;
+        ws.drop(2);
+        let p = bands[2];
+        let g: Vector = std::array::from_fn(|i| {
+            if i < ws.q {
+                u.g_bands[p][ws.bands[i]]
+            } else {
+                0.0
+            }
+        });
+        let (r, _, _) = ws.solve(&g);
+        for i in 0..ws.q {
+            let back: f64 = (0..ws.q)
+                .map(|k| u.g_bands[ws.bands[i]][ws.bands[k]] * r[k])
+                .sum();
+            assert!((back - g[i]).abs() <= 1e-10 * g.iter().fold(0.0f64, |m, v| m.max(v.abs())));
+        }
     }
 }
