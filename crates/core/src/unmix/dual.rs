@@ -5,11 +5,11 @@
 //! G = B H⁻¹ Bᵀ the step moves the band values by G_·p − G_·A G_AA⁻¹ G_Ap and the multipliers by
 //! G_AA⁻¹ G_Ap, so a step costs two small triangular solves and one pass over the bands, and
 //! G_AA = LDLᵀ gains a row per added band where the factorisation J = L⁻ᵀQ of the textbook
-//! method needs a Givens rotation per free direction (a square root and a division each). The band values are those the
-//! steps carried (B α to round-off, the working set's exactly 0), not B α formed again (186
-//! multiply-adds, 5 % of the real-time path; docs/speed.md), and α = α_u + H⁻¹B_Aᵀμ is formed
-//! only where it is asked for (`Unmixer::solve_pixel`). A pixel of a cube starts from the
-//! previous pixel's final working set (`warm_start`), not the empty one.
+//! method needs a Givens rotation per free direction (a square root and a division each). The
+//! band values are those the steps carried (B α to round-off, the working set's exactly 0), not
+//! B α formed again (186 multiply-adds, 5 % of the real-time path; docs/speed.md), and
+//! α = α_u + H⁻¹B_Aᵀμ is formed only where it is asked for (`Unmixer::solve_pixel`). A pixel of a
+//! cube starts from the previous pixel's final working set (`warm_start`), not the empty one.
 
 use crate::error::Error;
 use crate::error::Result;
@@ -29,9 +29,9 @@ type Vector = [f64; MAX_BASIS];
 const DEPENDENT: f64 = 1e-13;
 
 /// The working set: its bands, their multipliers and the factor G_AA = L D Lᵀ (L unit lower
-/// triangular): its solves divide only by D, off the chain of dependent multiply-adds that the
-/// Cholesky factor's divisions by its diagonal were on. A pixel's final set is the next pixel's
-/// start (`Unmixer::dual_active_set`).
+/// triangular), whose solves divide only by D, independently of each other, where a Cholesky
+/// factor's divisions by its diagonal sit on the solves' chain of multiply-adds. A pixel's final
+/// set is the next pixel's start (`Unmixer::dual_active_set`).
 #[derive(Clone, Copy)]
 pub(super) struct WorkingSet {
     /// L below its unit diagonal, q × q, row-major: `l[i][k]`, k < i.
@@ -52,6 +52,18 @@ impl WorkingSet {
             mu: [0.0; MAX_BASIS],
             q: 0,
         }
+    }
+
+    /// The band `values` at the working set's bands, in its order (0 past them): G_Ap from G's
+    /// row p, s_A from the band values.
+    fn gather(&self, values: &[f64; MAX_BANDS]) -> Vector {
+        std::array::from_fn(|i| {
+            if i < self.q {
+                values[self.bands[i]]
+            } else {
+                0.0
+            }
+        })
     }
 
     /// r = G_AA⁻¹ g given g = G_Ap, y = L⁻¹g and z = D⁻¹y (the new row of L if p is added).
@@ -146,8 +158,7 @@ impl Unmixer {
                     )));
                 }
                 let q = ws.q;
-                let g: Vector = std::array::from_fn(|i| if i < q { gp[ws.bands[i]] } else { 0.0 });
-                let (r, y, z) = ws.solve(&g);
+                let (r, y, z) = ws.solve(&ws.gather(gp));
                 let schur = gp[p] - y[..q].iter().zip(&z).map(|(y, z)| y * z).sum::<f64>();
                 // Partial step: the first active multiplier to reach zero.
                 let mut t1 = f64::INFINITY;
@@ -230,8 +241,8 @@ impl Unmixer {
         let mut drops = 0;
         while ws.q > 0 {
             let q = ws.q;
-            let g: Vector = std::array::from_fn(|i| if i < q { -s[ws.bands[i]] } else { 0.0 });
-            let (mu, _, _) = ws.solve(&g);
+            let (r, _, _) = ws.solve(&ws.gather(s));
+            let mu = r.map(|v| -v);
             if mu[..q].iter().all(|&v| !(v < 0.0)) {
                 ws.mu = mu;
                 break;
@@ -364,14 +375,7 @@ mod tests {
     fn factored(u: &Unmixer, bands: &[usize]) -> WorkingSet {
         let mut ws = WorkingSet::empty();
         for &p in bands {
-            let g: Vector = std::array::from_fn(|i| {
-                if i < ws.q {
-                    u.g_bands[p][ws.bands[i]]
-                } else {
-                    0.0
-                }
-            });
-            let (_, y, z) = ws.solve(&g);
+            let (_, y, z) = ws.solve(&ws.gather(&u.g_bands[p]));
             let schur = u.g_bands[p][p] - y[..ws.q].iter().zip(&z).map(|(y, z)| y * z).sum::<f64>();
             ws.add(p, 0.0, &z, schur);
         }
@@ -408,11 +412,11 @@ mod tests {
         let u = Unmixer::new(&DMatrix::identity(6, 6), &b, 0.0).unwrap();
         let bands = [3, 17, 8, 29, 0, 12];
         let full = factored(&u, &bands);
-        assert!(
-            factor_error(&u, &full) <= 1e-13,
-            "{:e}",
-            factor_error(&u, &full)
-        );
+        let check = |ws: &WorkingSet, what: &str| {
+            let e = factor_error(&u, ws);
+            assert!(e <= 1e-13, "{what}: L D Lᵀ off G_AA by {e:e}");
+        };
+        check(&full, "six bands added");
         // Each position dropped, then a second one: the rest keep their order and their factor.
         for at in 0..6 {
             let mut ws = full;
@@ -420,30 +424,17 @@ mod tests {
             let mut rest = bands.to_vec();
             rest.remove(at);
             assert_eq!(&ws.bands[..5], &rest[..]);
-            assert!(
-                factor_error(&u, &ws) <= 1e-13,
-                "drop {at}: {:e}",
-                factor_error(&u, &ws)
-            );
+            check(&ws, &format!("position {at} dropped"));
             ws.drop(at.min(3));
-            assert_eq!(ws.q, 4);
-            assert!(
-                factor_error(&u, &ws) <= 1e-13,
-                "{:e}",
-                factor_error(&u, &ws)
-            );
+            rest.remove(at.min(3));
+            assert_eq!(&ws.bands[..ws.q], &rest[..]);
+            check(&ws, &format!("position {at}, then {} dropped", at.min(3)));
         }
-        // A dropped band added back solves as before: G_AA r = g to round-off.
+        // The downdated factor solves G_AA r = g (the dropped band's column) to round-off.
         let mut ws = full;
         ws.drop(2);
         let p = bands[2];
-        let g: Vector = std::array::from_fn(|i| {
-            if i < ws.q {
-                u.g_bands[p][ws.bands[i]]
-            } else {
-                0.0
-            }
-        });
+        let g = ws.gather(&u.g_bands[p]);
         let (r, _, _) = ws.solve(&g);
         for i in 0..ws.q {
             let back: f64 = (0..ws.q)
