@@ -134,11 +134,11 @@ impl Cube {
         }
         let mut out = Cube::zeros(self.width, self.height, m.len());
         use rayon::prelude::*;
-        let src: Vec<&[f32]> = (0..self.planes).map(|j| self.plane(j)).collect();
+        let n = self.pixels();
         out.data
-            .par_chunks_mut(self.pixels().max(1))
+            .par_chunks_mut(n.max(1))
             .zip(m.par_iter())
-            .for_each(|(dst, row)| mix_row(row, &src, dst));
+            .for_each(|(dst, row)| mix_row(row, &self.data, n, dst));
         Ok(out)
     }
 
@@ -169,9 +169,8 @@ impl Cube {
                 for (copy, plane) in aside.chunks_exact_mut(MIX_BLOCK).zip(&planes) {
                     copy[..b].copy_from_slice(&plane[at..at + b]);
                 }
-                let src: Vec<&[f32]> = aside.chunks_exact(MIX_BLOCK).map(|c| &c[..b]).collect();
                 for (plane, row) in planes.iter_mut().zip(m) {
-                    mix_row(row, &src, &mut plane[at..at + b]);
+                    mix_row(row, &aside, MIX_BLOCK, &mut plane[at..at + b]);
                 }
             }
         });
@@ -184,23 +183,25 @@ const MIX_RANGE: usize = 16384;
 /// Pixels of each plane that the task copies aside at a time (6 planes: 6 kB, in L1).
 const MIX_BLOCK: usize = 256;
 
-/// dst = Σ_j row_j · src_j in f32, the terms in order. The first non-zero term is written, not
-/// added: it overwrites what dst held, and a fresh page read before its first write is mapped
-/// twice, the second time with a TLB shootdown of every core (0.0 + w·s keeps the sum's bits).
-fn mix_row(row: &[f64], src: &[&[f32]], dst: &mut [f32]) {
+/// dst = Σ_j row_j · src_j in f32, the terms in order, source plane j starting at j · `stride`
+/// of `src` (a cube's planes, or a block of them copied aside). The first non-zero term is
+/// written, not added: it overwrites what dst held, and a fresh page read before its first write
+/// is mapped twice, the second time with a TLB shootdown of every core (0.0 + w·s keeps the
+/// sum's bits).
+fn mix_row(row: &[f64], src: &[f32], stride: usize, dst: &mut [f32]) {
+    let len = dst.len();
+    let plane = |j: usize| &src[j * stride..j * stride + len];
     let mut terms = row.iter().enumerate().filter(|(_, &w)| w != 0.0);
     match terms.next() {
         Some((j, &w)) => {
-            let w = w as f32;
-            dst.iter_mut()
-                .zip(src[j])
-                .for_each(|(d, s)| *d = 0.0 + w * s);
+            let (w, s) = (w as f32, plane(j));
+            dst.iter_mut().zip(s).for_each(|(d, s)| *d = 0.0 + w * s);
         }
         None => dst.fill(0.0),
     }
     for (j, &w) in terms {
-        let w = w as f32;
-        dst.iter_mut().zip(src[j]).for_each(|(d, s)| *d += w * s);
+        let (w, s) = (w as f32, plane(j));
+        dst.iter_mut().zip(s).for_each(|(d, s)| *d += w * s);
     }
 }
 
