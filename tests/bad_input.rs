@@ -198,6 +198,36 @@ fn out_of_range_values_in_the_light_path_sections() {
 }
 
 #[test]
+fn values_at_the_ends_of_the_f64_range_are_shown_in_exponent_form() {
+    let scratch = tmpdir("bad-extreme");
+    let d = scratch.path();
+    for (toml, key, value) in [
+        ("[rig.lens]\nna = 1e308\n", "rig.lens.na", "= 1e308:"),
+        ("[rig.lens]\nna = -1e-300\n", "rig.lens.na", "= -1e-300:"),
+        // Refused while reading the file (not an integer): the value as written, shown short.
+        (
+            "[rig.sensor]\nbits = 1e308\n",
+            "rig.sensor.bits",
+            "= 1e308:",
+        ),
+        // A figure derived from it, in the reason.
+        (
+            "[rig.dmd]\n[rig.fourier_filter]\npinhole_radius_um = 1e-300\n",
+            "rig.fourier_filter.pinhole_radius_um",
+            "= 1e-300:",
+        ),
+    ] {
+        let (ok, err) = simulate(d, toml, None);
+        assert_one_line_error(ok, &err, &["exp.toml", key, value]);
+        let longest = err.split(|c: char| !c.is_ascii_digit()).map(str::len).max();
+        assert!(
+            longest < Some(25),
+            "a number of {longest:?} digits in: {err}"
+        );
+    }
+}
+
+#[test]
 fn a_timing_that_needs_a_faster_dmd_is_refused() {
     let scratch = tmpdir("bad-dmdrate");
     let d = scratch.path();

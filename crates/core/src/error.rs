@@ -77,14 +77,37 @@ pub fn check_count(
     Err(Error::config(file, key, v, &why))
 }
 
+/// A value or message as an error shows it: as written, but every decimal number longer than 24
+/// characters (Display writes 1e308 with 308 digits) in exponent form, the same shortest digits
+/// that read back to the same f64, so the error stays one short line.
+pub fn shown(text: impl std::fmt::Display) -> String {
+    let text = text.to_string();
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text.as_str();
+    while let Some(start) = rest.find(|c: char| c.is_ascii_digit()) {
+        let len = rest[start..]
+            .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .unwrap_or(rest.len() - start);
+        out.push_str(&rest[..start]);
+        let number = &rest[start..start + len];
+        match number.parse::<f64>() {
+            Ok(v) if number.len() > 24 => out.push_str(&format!("{v:e}")),
+            _ => out.push_str(number),
+        }
+        rest = &rest[start + len..];
+    }
+    out.push_str(rest);
+    out
+}
+
 impl Error {
     /// Shorthand for a configuration error.
     pub fn config(file: &str, key: &str, value: impl std::fmt::Display, reason: &str) -> Self {
         Error::Config {
             file: file.to_string(),
             key: key.to_string(),
-            value: value.to_string(),
-            reason: reason.to_string(),
+            value: shown(value),
+            reason: shown(reason),
         }
     }
 
@@ -95,7 +118,7 @@ impl Error {
             Error::Numerical(_) | Error::Shape(_) => Error::Within {
                 file: file.to_string(),
                 key: key.to_string(),
-                value: value.to_string(),
+                value: shown(value),
                 source: Box::new(self),
             },
             named => named,
@@ -126,6 +149,30 @@ impl Error {
         Error::Io {
             path: path.into(),
             source,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_decimals_are_shown_in_exponent_form_and_the_rest_as_written() {
+        let long = format!("floating point `{}`, expected u32", 1e308);
+        assert_eq!(shown(&long), "floating point `1e308`, expected u32");
+        assert_eq!(shown(-1e-300), "-1e-300");
+        assert_eq!(shown(f64::MAX), format!("{:e}", f64::MAX));
+        assert_eq!(shown(f64::MAX).parse::<f64>().unwrap(), f64::MAX);
+        for kept in [
+            "0.25",
+            "100000",
+            "u64::MAX 18446744073709551615",
+            "1.2.3",
+            "[[1.0, 0.0]]",
+            "NaN",
+        ] {
+            assert_eq!(shown(kept), kept);
         }
     }
 }

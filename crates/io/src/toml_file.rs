@@ -1,6 +1,7 @@
 //! TOML settings files (experiments, the design tools' families): read so that an error names
 //! the file, the line, the key path and the value written there.
 
+use specmux_core::error::shown;
 use specmux_core::{Error, Result};
 
 /// `T` from TOML `text`; an error names `file` (and the line, when `lines`: text the user
@@ -27,14 +28,14 @@ fn parse_error(
         (true, Some(line)) => format!("{file}:{line}"),
         _ => file.to_string(),
     };
-    let reason = inner.message().replace('\n', " ");
+    let reason = shown(inner.message().replace('\n', " "));
     let path = err.path().to_string();
     if path == "." {
         return Error::Toml { file, msg: reason };
     }
     let written = text.parse::<toml::Table>().ok();
     let msg = match written.as_ref().and_then(|t| value_at(t, err.path())) {
-        Some(v) => format!("`{path}` = {v}: {reason}"),
+        Some(v) => format!("`{path}` = {}: {reason}", shown(v)),
         None => format!("`{path}`: {reason}"),
     };
     Error::Toml { file, msg }
