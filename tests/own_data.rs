@@ -138,6 +138,26 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
         &["reconstruct", "frame.tif", "--experiment", "dead-leaves"],
         &["frame.tif"],
     );
+    // Values whose f32 squares leave the normal range: refused, naming the pixel and value.
+    let mut big = vec![1.0f32; 64 * 64];
+    big[2 * 64 + 5] = 3e38;
+    for (name, data, must) in [
+        (
+            "big.exr",
+            big,
+            ["pixel (5, 2) is 3e38", "within ±1e15", "scale the frame"],
+        ),
+        (
+            "tiny.exr",
+            vec![1e-30f32; 64 * 64],
+            ["is 1e-30, under 1e-15", "(", "scale the frame"],
+        ),
+    ] {
+        let frame = Cube::from_vec(64, 64, 1, data).unwrap();
+        specmux_io::exr::write(&d.join(name), &frame, &["Y".to_string()]).unwrap();
+        let args = ["reconstruct", name, "--experiment", "dead-leaves"];
+        refused(d, &args, &[&[name][..], &must[..]].concat());
+    }
     // A 16-bit PNG holds raw DN: an experiment without a camera cannot read it.
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_pixel(64, 64, image::Luma([1000]));
     img.save(d.join("raw.png")).unwrap();

@@ -114,6 +114,10 @@ def test_a_reconstructor_built_once_gives_what_reconstruct_gives(exp, sim, cube)
     bad[3, 5] = np.nan
     with pytest.raises(specmux.SpecmuxError, match=r"pixel \(5, 3\)"):
         recon.realtime(bad)
+    # Finite but beyond what f32 squares hold: refused by value, with what to do.
+    bad[3, 5] = 3e38
+    with pytest.raises(specmux.SpecmuxError, match=r"pixel \(5, 3\) is 3e38.*scale the frame"):
+        recon(bad)
 
 
 def test_bad_toml_names_the_key():

@@ -12,6 +12,21 @@ pub struct Cube {
     pub data: Vec<f32>,
 }
 
+/// `v` as written when it is a plain size, in exponent form when it is large or small.
+fn plain_or_exponent(v: f32) -> String {
+    match v.abs() {
+        a if a >= 1e6 || (a > 0.0 && a < 1e-4) => format!("{v:e}"),
+        _ => format!("{v}"),
+    }
+}
+
+/// Largest |value| a frame may hold: the squares of 2²⁸ such values sum to under f32's largest
+/// (3.4·10³⁸), so no sum the reconstruction forms overflows.
+pub const FRAME_MAX: f32 = 1e15;
+/// Smallest largest |value| of a frame that is not all zero: its squares stay normal f32
+/// numbers (above 1.2·10⁻³⁸), so the products keep their precision.
+pub const FRAME_MIN: f32 = 1e-15;
+
 impl Cube {
     /// A cube of zeros.
     pub fn zeros(width: usize, height: usize, planes: usize) -> Cube {
@@ -106,6 +121,37 @@ impl Cube {
     /// True when every value is finite.
     pub fn all_finite(&self) -> bool {
         self.data.iter().all(|v| v.is_finite())
+    }
+
+    /// Why this cube cannot be a frame (or a calibration frame) that the reconstruction takes
+    /// in: its first value that is not finite or beyond ±[`FRAME_MAX`], or, not all zero, its
+    /// largest |value| under [`FRAME_MIN`]; "pixel (x, y) …", after "[k]: " when it has planes.
+    pub fn frame_problem(&self) -> Option<String> {
+        let n = self.width * self.height;
+        let at = |p: usize| {
+            let (k, x, y) = (
+                p / n.max(1),
+                p % self.width.max(1),
+                (p % n.max(1)) / self.width.max(1),
+            );
+            let plane = if self.planes > 1 {
+                format!("[{k}]: ")
+            } else {
+                String::new()
+            };
+            format!(
+                "{plane}pixel ({x}, {y}) is {}",
+                plain_or_exponent(self.data[p])
+            )
+        };
+        if let Some(p) = self.data.iter().position(|v| !v.is_finite()) {
+            return Some(format!("{}: a frame must be finite", at(p)));
+        }
+        if let Some(p) = self.data.iter().position(|v| v.abs() > FRAME_MAX) {
+            return Some(format!("{}: a frame's values must lie within ±{FRAME_MAX:e} (the reconstruction's f32 sums of squares would overflow); scale the frame, the cube scales with it", at(p)));
+        }
+        let largest = self.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        (largest > 0.0 && largest < FRAME_MIN).then(|| format!("its largest |value| is {largest:e}, under {FRAME_MIN:e} (the reconstruction's f32 products would leave the normal range); scale the frame, the cube scales with it"))
     }
 
     /// Plane k multiplied by `k_per_plane[k]`.
@@ -208,6 +254,24 @@ fn mix_row(row: &[f64], src: &[f32], stride: usize, dst: &mut [f32]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_frame_must_be_finite_and_within_the_range_its_squares_hold() {
+        let frame = |v: &[f32]| Cube::from_vec(2, 2, v.len() / 4, v.to_vec()).unwrap();
+        assert_eq!(frame(&[0.0; 4]).frame_problem(), None);
+        assert_eq!(frame(&[1e15, -1e15, 1e-15, 0.0]).frame_problem(), None);
+        let why = |v: &[f32]| frame(v).frame_problem().unwrap();
+        assert_eq!(
+            why(&[1.0, 2.0, 3.0, f32::NAN]),
+            "pixel (1, 1) is NaN: a frame must be finite"
+        );
+        assert!(why(&[1.0, -1.1e15, 0.0, 0.0])
+            .starts_with("pixel (1, 0) is -1.1e15: a frame's values must lie within ±1e15"));
+        assert!(why(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3e38, 0.0])
+            .starts_with("[1]: pixel (0, 1) is 3e38:"));
+        assert!(why(&[0.0, 9e-16, 0.0, -1e-20])
+            .starts_with("its largest |value| is 9e-16, under 1e-15"));
+    }
 
     #[test]
     fn planes_are_contiguous() {

@@ -18,7 +18,8 @@ fn extension(path: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// One camera frame, checked finite.
+/// One camera frame, checked finite and within the range the reconstruction takes
+/// ([`Cube::frame_problem`]).
 pub fn read(path: &Path) -> Result<Cube> {
     let bad = |msg: String| Error::Exr {
         path: path.to_path_buf(),
@@ -35,14 +36,10 @@ pub fn read(path: &Path) -> Result<Cube> {
             frame.planes
         )));
     }
-    if let Some(p) = frame.data.iter().position(|v| !v.is_finite()) {
-        let (x, y) = (p % frame.width, p / frame.width);
-        return Err(bad(format!(
-            "pixel ({x}, {y}) is {}: a frame must be finite",
-            frame.data[p]
-        )));
+    match frame.frame_problem() {
+        Some(why) => Err(bad(why)),
+        None => Ok(frame),
     }
-    Ok(frame)
 }
 
 /// A 16-bit greyscale PNG or TIFF as DN.

@@ -80,7 +80,8 @@ pub fn to_frame(a: &Bound<'_, PyAny>, what: &str, size: Option<(usize, usize)>) 
     Ok(f)
 }
 
-/// Every plane of `f` is `width` × `height` (None: any size) and finite; `what` names it.
+/// Every plane of `f` is `width` × `height` (None: any size), finite and within the range the
+/// reconstruction takes ([`Cube::frame_problem`]); `what` names it.
 pub fn check_frame(f: &Cube, what: &str, size: Option<(usize, usize)>) -> PyResult<()> {
     if let Some((w, h)) = size.filter(|&s| s != (f.width, f.height)) {
         return Err(err(format!(
@@ -88,20 +89,11 @@ pub fn check_frame(f: &Cube, what: &str, size: Option<(usize, usize)>) -> PyResu
             f.width, f.height
         )));
     }
-    if let Some(p) = f.data.iter().position(|v| !v.is_finite()) {
-        let n = f.width * f.height;
-        let (k, x, y) = (p / n, p % f.width, (p % n) / f.width);
-        let plane = if f.planes > 1 {
-            format!("[{k}]")
-        } else {
-            String::new()
-        };
-        return Err(err(format!(
-            "{what}{plane}: pixel ({x}, {y}) is {}: a frame must be finite",
-            f.data[p]
-        )));
+    match f.frame_problem() {
+        Some(why) if why.starts_with('[') => Err(err(format!("{what}{why}"))),
+        Some(why) => Err(err(format!("{what}: {why}"))),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// True when `a` holds integers (`numpy.asarray(a).dtype.kind` is `i` or `u`): raw DN, as a
