@@ -138,19 +138,24 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
         &["reconstruct", "frame.tif", "--experiment", "dead-leaves"],
         &["frame.tif"],
     );
-    // Values whose f32 squares leave the normal range: refused, naming the pixel and value.
+    // Values whose Fourier transform or products leave f32's range: refused, naming the pixel
+    // and the value.
     let mut big = vec![1.0f32; 64 * 64];
     big[2 * 64 + 5] = 3e38;
     for (name, data, must) in [
         (
             "big.exr",
             big,
-            ["pixel (5, 2) is 3e38", "within ±1e15", "scale the frame"],
+            [
+                "pixel (5, 2) is 3e38",
+                "64×64 frame's values must lie within ±2.4e32",
+                "scale the frame",
+            ],
         ),
         (
             "tiny.exr",
-            vec![1e-30f32; 64 * 64],
-            ["is 1e-30, under 1e-15", "(", "scale the frame"],
+            vec![1e-33f32; 64 * 64],
+            ["is 1e-33, under 1e-30", "(", "scale the frame"],
         ),
     ] {
         let frame = Cube::from_vec(64, 64, 1, data).unwrap();

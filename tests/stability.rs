@@ -217,7 +217,12 @@ fn light_most_pixels_saturated() {
 
 /// The ideal prototype's reconstructor at 64² (no camera), built from its captures.
 fn ideal_reconstructor() -> (specmux_core::reconstructor::Reconstructor, Cube) {
-    let exp = Experiment::from_toml(&toml(""), "case.toml").unwrap();
+    reconstructor_of(&toml(""))
+}
+
+/// The reconstructor of an experiment `text` built from its captures, and its frame.
+fn reconstructor_of(text: &str) -> (specmux_core::reconstructor::Reconstructor, Cube) {
+    let exp = Experiment::from_toml(text, "case.toml").unwrap();
     let lib = Library::default_root();
     let m = specmux_twin::scene::Materials::load(&lib).unwrap();
     let rig = specmux_twin::rig::Rig::build(&exp, &lib, &m).unwrap();
@@ -264,6 +269,38 @@ fn light_frames_scaled_by_1e_minus20_and_1e20() {
         record(
             &format!("light: frame × {k:e}"),
             &format!("finite, cube × {k:e} to {rel:.1e} of its peak"),
+        );
+    }
+}
+
+#[test]
+fn light_frames_at_the_ends_of_the_range_every_method_takes() {
+    use specmux_core::cube::{FRAME_MIN, FRAME_SUM_MAX};
+    for method in ["fourier", "gap", "gap-tv", "joint"] {
+        let text = format!("[scene]\nsize = [64, 64]\n[reconstruct.gap]\nmethod = \"{method}\"\n");
+        let (r, frame) = reconstructor_of(&text);
+        let peak = frame.data.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let top = FRAME_SUM_MAX / (64.0 * 64.0);
+        let scaled = |to: f32| {
+            let mut f = frame.clone();
+            f.data.iter_mut().for_each(|v| *v *= to / peak);
+            r.run(&f, None).map(|o| o.cube)
+        };
+        // Inside the range: a finite cube; past either end: refused, naming the frame.
+        for to in [top, FRAME_MIN] {
+            let cube = scaled(to).unwrap();
+            assert!(cube.all_finite(), "{method} at {to:e}");
+        }
+        for to in [2.0 * top, 0.5 * FRAME_MIN] {
+            let e = scaled(to).unwrap_err().to_string();
+            assert!(
+                e.contains("frame: ") && e.contains("scale the frame"),
+                "{method}: {e}"
+            );
+        }
+        record(
+            &format!("light: frame peak at {top:.1e} and at {FRAME_MIN:e}, {method}"),
+            "finite; at twice / half of them refused: `frame: … scale the frame`",
         );
     }
 }

@@ -312,10 +312,8 @@ impl Demux {
                 frame.width, frame.height, frame.planes, self.fft.w, self.fft.h
             )));
         }
-        if !frame.all_finite() {
-            return Err(Error::Numerical(
-                "the frame contains NaN or infinite values".into(),
-            ));
+        if let Some(why) = frame.frame_problem() {
+            return Err(Error::Numerical(format!("frame: {why}")));
         }
         let spec = self.spectrum(&frame.data);
         out.planes_mut()

@@ -132,7 +132,7 @@ impl GpuDemux {
         })
     }
 
-    /// Check a frame (one plane of this size, finite, as `Demux::run` requires) and copy it to
+    /// Check a frame (one plane of this size, finite and in range, as `Demux::run` requires) and copy it to
     /// the GPU.
     pub fn upload(&self, ctx: &GpuContext, frame: &Cube) -> Result<()> {
         if frame.planes != 1 || frame.width != self.w || frame.height != self.h {
@@ -141,10 +141,8 @@ impl GpuDemux {
                 frame.width, frame.height, frame.planes, self.w, self.h
             )));
         }
-        if !frame.all_finite() {
-            return Err(GpuError::Numerical(
-                "the frame contains NaN or infinite values".into(),
-            ));
+        if let Some(why) = frame.frame_problem() {
+            return Err(GpuError::Numerical(format!("frame: {why}")));
         }
         ctx.queue
             .write_buffer(&self.frame, 0, bytemuck::cast_slice(&frame.data));
