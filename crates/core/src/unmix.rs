@@ -20,22 +20,21 @@ use serde::Serialize;
 
 mod dual;
 
-/// Largest number of basis vectors J (stack arrays in the per-pixel solver).
-pub const MAX_BASIS: usize = 8;
-/// Largest number of bands (constraints) in the per-pixel solver.
-pub const MAX_BANDS: usize = 64;
+use dual::band_blocks;
+use dual::lower;
+use dual::BandQp;
+use dual::WorkingSet;
+use dual::BAND_BLOCK;
+pub use dual::{MAX_BANDS, MAX_BASIS, MAX_ITERATIONS};
+
 /// Largest number of channels x̂ per pixel.
 pub const MAX_CHANNELS: usize = 16;
 /// Largest condition number of H accepted by [`Unmixer::new`].
 pub const MAX_CONDITION: f64 = 1e12;
-/// Active-set iterations allowed per pixel before [`Unmixer::solve_pixel`] gives up.
-pub const MAX_ITERATIONS: usize = 500;
 /// Rows of the image handled by one rayon task in [`Unmixer::unmix`].
 const ROWS_PER_CHUNK: usize = 8;
 /// Pixels per register block of the projection r = P x̂.
 const LANES: usize = 8;
-/// Bands per register block of the solver's band sums ([`band_blocks`]).
-const BAND_BLOCK: usize = 8;
 /// Pixels per block of the unmixing: one 64-byte cache line of every band plane, so that a
 /// block's bands are written once, whole lines at a time.
 const LINE: usize = 16;
@@ -63,17 +62,10 @@ pub struct Unmixer {
     /// B by columns: `bt[j][k]` = basis vector j at band k (the spectrum Bα as a sum of
     /// scaled columns, which vectorises over the bands).
     bt: Vec<[f64; MAX_BANDS]>,
-    /// 1/‖b_k‖_{H⁻¹} = 1/‖L⁻¹b_kᵀ‖ for each row of B (0 for a zero row, which no α can
-    /// violate): a band's violation times it is its distance from the constraint in the metric
-    /// of H, so the dual method adds the band whose first step raises the objective most (13 %
-    /// fewer steps on dead-leaves than with 1/‖b_k‖; docs/speed.md). Zero-padded to
-    /// `MAX_BANDS`, so the solver's per-pixel copy has a size known when compiling.
-    b_inv_norm: [f64; MAX_BANDS],
     /// L⁻ᵀ for H = LLᵀ, column-major and zero-padded: the GPU kernel's starting factor.
     linv_t: [[f64; MAX_BASIS]; MAX_BASIS],
-    /// G = B H⁻¹ Bᵀ by rows, each zero-padded to `MAX_BANDS`: the band values' response to the
-    /// multipliers (the dual active set runs on it).
-    g_bands: Vec<[f64; MAX_BANDS]>,
+    /// The QP in band space on G = B H⁻¹ Bᵀ that the constrained pixels are solved by.
+    qp: BandQp,
     /// H⁻¹ b_kᵀ for each band k, band-major m × n: α = α_u + Σ μ_k H⁻¹ b_kᵀ.
     hinv_bt: Vec<f64>,
     condition: f64,
@@ -109,6 +101,24 @@ pub struct SolveInfo {
 }
 
 impl SolveInfo {
+    /// How a pixel was solved: `steps` of the dual method ending in the working set `ws`, or
+    /// None where the unconstrained minimiser was feasible (no step, no band held).
+    fn new(steps: Option<usize>, ws: &WorkingSet) -> SolveInfo {
+        let mut info = SolveInfo {
+            iterations: 0,
+            active: 0,
+            bands: [0; MAX_BASIS],
+            multipliers: [0.0; MAX_BASIS],
+        };
+        if let Some(steps) = steps {
+            info.iterations = steps;
+            info.active = ws.bands().len();
+            info.bands[..info.active].copy_from_slice(ws.bands());
+            info.multipliers[..info.active].copy_from_slice(ws.multipliers());
+        }
+        info
+    }
+
     /// The bands of the final working set (where B α = 0 is enforced).
     pub fn active_bands(&self) -> &[usize] {
         &self.bands[..self.active]
@@ -220,19 +230,23 @@ impl Unmixer {
             p32: row_major(&p).iter().map(|&v| v as f32).collect(),
             gain: vec![1.0; m],
             bt: b.column_iter().map(|col| padded(m, |k| col[k])).collect(),
-            b_inv_norm: padded(m, |k| {
-                let norm = (linv.rows(0, n) * b.row(k).transpose()).norm();
-                if norm > 0.0 {
-                    1.0 / norm
-                } else {
-                    0.0
-                }
-            }),
             linv_t,
-            g_bands: g_bands
-                .row_iter()
-                .map(|row| padded(m, |k| row[k]))
-                .collect(),
+            qp: BandQp {
+                n,
+                m,
+                g_bands: g_bands
+                    .row_iter()
+                    .map(|row| padded(m, |k| row[k]))
+                    .collect(),
+                b_inv_norm: padded(m, |k| {
+                    let norm = (linv.rows(0, n) * b.row(k).transpose()).norm();
+                    if norm > 0.0 {
+                        1.0 / norm
+                    } else {
+                        0.0
+                    }
+                }),
+            },
             hinv_bt: row_major(&hinv_bt.transpose()),
             condition,
         })
@@ -256,7 +270,7 @@ impl Unmixer {
             unconstrained: &self.mx,
             projection: &self.p32,
             basis_columns: &self.bt,
-            band_inv_norm: &self.b_inv_norm[..self.m],
+            band_inv_norm: &self.qp.b_inv_norm[..self.m],
             gains: &self.gain,
             linv_t: &self.linv_t,
         }
@@ -355,7 +369,9 @@ impl Unmixer {
             )));
         }
         let mut r = [0.0; MAX_BANDS];
-        let (info, au) = self.solve(xhat, &mut r, &mut dual::WorkingSet::empty())?;
+        let mut ws = WorkingSet::empty();
+        let (steps, au) = self.solve(xhat, &mut r, &mut ws)?;
+        let info = SolveInfo::new(steps, &ws);
         let alpha = self.alpha_from(&au, &info);
         if let Some(v) = alpha[..self.n].iter().find(|v| !v.is_finite()) {
             return Err(Error::Numerical(format!(
@@ -367,28 +383,21 @@ impl Unmixer {
     }
 
     /// [`Unmixer::solve_pixel`]'s work on checked input: writes the band values r = Bα (to the
-    /// solver's round-off; the bands it holds at zero exactly 0) and returns how the pixel was
-    /// solved with its unconstrained minimiser α_u; a constrained pixel's dual method starts from
-    /// the working set `start` and leaves its final set there.
+    /// solver's round-off; the bands it holds at zero exactly 0) and returns the unconstrained
+    /// minimiser α_u with the steps of the dual method, which starts from the working set `start`
+    /// and leaves its final set there — or None where α_u is feasible (`start` left as it was).
     fn solve(
         &self,
         xhat: &[f64],
         r: &mut [f64; MAX_BANDS],
-        start: &mut dual::WorkingSet,
-    ) -> Result<(SolveInfo, [f64; MAX_BASIS])> {
+        start: &mut WorkingSet,
+    ) -> Result<(Option<usize>, [f64; MAX_BASIS])> {
         let au = self.unconstrained_alpha(xhat);
         self.spectrum(&au[..self.n], r);
-        let mut info = SolveInfo {
-            iterations: 0,
-            active: 0,
-            bands: [0; MAX_BASIS],
-            multipliers: [0.0; MAX_BASIS],
-        };
         if r[..self.m].iter().all(|&v| v >= 0.0) {
-            return Ok((info, au));
+            return Ok((None, au));
         }
-        self.dual_active_set(r, &mut info, start)?;
-        Ok((info, au))
+        Ok((Some(self.qp.solve(r, start)?), au))
     }
 
     /// α = α_u + Σ μ_k H⁻¹b_kᵀ over the final working set (0 when all J coefficients are
@@ -406,17 +415,6 @@ impl Unmixer {
             }
         }
         alpha
-    }
-
-    /// Accept the active set's result: every band value r finite and ≥ −1e-9·scale.
-    fn check_feasible(&self, r: &[f64], scale: f64) -> Result<()> {
-        let worst = dual::fold8(&r[..padded_len(self.m)], 0.0, dual::lower);
-        if !(worst >= -1e-9 * scale) || r[..self.m].iter().any(|v| !v.is_finite()) {
-            return Err(Error::Numerical(format!(
-                "unmixing active set ended infeasible: min band value {worst:e} (scale {scale:e})"
-            )));
-        }
-        Ok(())
     }
 
     /// Unmix a cube of channel planes x̂ into a cube of band planes r = Bα, α from the QP.
@@ -541,7 +539,7 @@ impl Unmixer {
         let mut block: Block = [[0.0; LINE]; MAX_BANDS];
         // The last solved pixel's final working set, the next one's start (in the chunk only, so
         // the result does not depend on how the threads split the cube).
-        let mut warm = dual::WorkingSet::empty();
+        let mut warm = WorkingSet::empty();
         // The first band's lines begin where (offset + pixel) is a multiple of LINE.
         let offset = bands[0].as_ptr() as usize / 4 % LINE;
         let mut start = 0;
@@ -566,7 +564,7 @@ impl Unmixer {
         start: usize,
         lanes: usize,
         block: &mut Block,
-        warm: &mut dual::WorkingSet,
+        warm: &mut WorkingSet,
         stats: &mut UnmixStats,
     ) -> std::result::Result<(), (usize, String)> {
         let mut low = [f32::INFINITY; LINE];
@@ -599,7 +597,7 @@ impl Unmixer {
         i: usize,
         block: &mut Block,
         l: usize,
-        warm: &mut dual::WorkingSet,
+        warm: &mut WorkingSet,
         stats: &mut UnmixStats,
     ) -> Result<()> {
         let mut xp = [0.0f64; MAX_CHANNELS];
@@ -607,14 +605,16 @@ impl Unmixer {
             *xv = x[i] as f64;
         }
         let mut r = [0.0f64; MAX_BANDS];
-        let (info, _) = self.solve(&xp[..self.c], &mut r, warm)?;
+        let (steps, _) = self.solve(&xp[..self.c], &mut r, warm)?;
         for ((b, &v), g) in block.iter_mut().zip(&r[..self.m]).zip(&self.gain) {
             b[l] = (v.max(0.0) * g) as f32;
         }
+        // Not the bands or multipliers (`SolveInfo`): the cube needs their count only.
         stats.constrained_pixels += 1;
-        stats.bound_pixels += (info.active > 0) as usize;
-        stats.max_iterations = stats.max_iterations.max(info.iterations);
-        stats.total_iterations += info.iterations;
+        stats.bound_pixels += steps.is_some_and(|_| !warm.bands().is_empty()) as usize;
+        let steps = steps.unwrap_or(0);
+        stats.max_iterations = stats.max_iterations.max(steps);
+        stats.total_iterations += steps;
         Ok(())
     }
 
@@ -650,7 +650,7 @@ impl Unmixer {
                 }
             }
             for (l, &a) in low.iter_mut().zip(&acc) {
-                *l = dual::lower(*l, a);
+                *l = lower(*l, a);
             }
             out[to..to + lanes].copy_from_slice(&acc[..lanes]);
         }
@@ -660,25 +660,6 @@ impl Unmixer {
 /// The `m` band values `value(k)`, zero-padded to `MAX_BANDS` (the solver's per-band arrays).
 fn padded(m: usize, value: impl Fn(usize) -> f64) -> [f64; MAX_BANDS] {
     std::array::from_fn(|k| if k < m { value(k) } else { 0.0 })
-}
-
-/// The bands rounded up to whole eight-band blocks: the solver's arrays hold 0 past `m`
-/// (zero-padded tables), which no extreme it takes over them can pick.
-#[inline(always)]
-fn padded_len(m: usize) -> usize {
-    m.next_multiple_of(BAND_BLOCK)
-}
-
-/// Bands eight at a time: each block's range and its values in `s` (zero-padded past the last
-/// band, so the last block is whole), for sums kept in registers across a block.
-fn band_blocks(
-    m: usize,
-    s: &mut [f64; MAX_BANDS],
-) -> impl Iterator<Item = (std::ops::Range<usize>, &mut [f64])> {
-    (0..m)
-        .step_by(BAND_BLOCK)
-        .zip(s.chunks_exact_mut(BAND_BLOCK))
-        .map(|(k0, out)| (k0..k0 + BAND_BLOCK, out))
 }
 
 /// `dst` ← `src`; a whole 64-byte line by non-temporal stores (it goes to memory without being
@@ -910,12 +891,13 @@ mod tests {
     /// agree to the solver's own feasibility tolerance (10⁻⁹ of the pixel's largest
     /// unconstrained band), with the warm start's multipliers ≥ 0 and its working set's bands
     /// exactly 0. Returns the steps of the two (empty start, warm start).
-    fn check_warm_start(u: &Unmixer, x: &[f64], warm: &mut dual::WorkingSet) -> [usize; 2] {
+    fn check_warm_start(u: &Unmixer, x: &[f64], warm: &mut WorkingSet) -> [usize; 2] {
         let (mut cold, mut warmed) = ([0.0; MAX_BANDS], [0.0; MAX_BANDS]);
-        let (cold_info, _) = u
-            .solve(x, &mut cold, &mut dual::WorkingSet::empty())
-            .unwrap();
-        let (info, _) = u.solve(x, &mut warmed, warm).unwrap();
+        let mut empty = WorkingSet::empty();
+        let (steps, _) = u.solve(x, &mut cold, &mut empty).unwrap();
+        let cold_info = SolveInfo::new(steps, &empty);
+        let (steps, _) = u.solve(x, &mut warmed, warm).unwrap();
+        let info = SolveInfo::new(steps, warm);
         // The solver's own scale: the largest unconstrained band value (`dual_active_set`).
         let mut unconstrained = [0.0; MAX_BANDS];
         u.spectrum(&u.unconstrained_alpha(x)[..u.n], &mut unconstrained);
@@ -1026,7 +1008,7 @@ mod tests {
         for (f, eta) in [(&f1, 1e-4), (&f0, 0.0), (&f0, 1e4)] {
             // Each pixel also solved from the previous one's final working set.
             let u = Unmixer::new(f, &b, eta).unwrap();
-            let mut warm = dual::WorkingSet::empty();
+            let mut warm = WorkingSet::empty();
             for _ in 0..60 {
                 // Large negative parts: many bands bind, often the vertex α = 0.
                 let x: Vec<f64> = (0..6).map(|_| normal(&mut rng) - 0.7).collect();
