@@ -79,24 +79,30 @@ pub fn check_count(
 
 /// A value or message as an error shows it: as written, but every decimal number longer than 24
 /// characters (Display writes 1e308 with 308 digits) in exponent form, the same shortest digits
-/// that read back to the same f64, so the error stays one short line.
+/// that read back to the same f64, so the error stays one short line. Digits within a word or a
+/// path (`run_2026…`, `/tmp/123…`) are left as they are.
 pub fn shown(text: impl std::fmt::Display) -> String {
     let text = text.to_string();
+    let word = |c: Option<char>| c.is_some_and(|c| c.is_alphanumeric() || "_/\\".contains(c));
     let mut out = String::with_capacity(text.len());
-    let mut rest = text.as_str();
-    while let Some(start) = rest.find(|c: char| c.is_ascii_digit()) {
-        let len = rest[start..]
+    let mut at = 0;
+    while let Some(found) = text[at..].find(|c: char| c.is_ascii_digit()) {
+        let start = at + found;
+        let len = text[start..]
             .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-            .unwrap_or(rest.len() - start);
-        out.push_str(&rest[..start]);
-        let number = &rest[start..start + len];
+            .unwrap_or(text.len() - start);
+        let before = text[..start].strip_suffix('-').unwrap_or(&text[..start]);
+        let standalone =
+            !word(before.chars().next_back()) && !word(text[start + len..].chars().next());
+        let number = &text[start..start + len];
+        out.push_str(&text[at..start]);
         match number.parse::<f64>() {
-            Ok(v) if number.len() > 24 => out.push_str(&format!("{v:e}")),
+            Ok(v) if standalone && number.len() > 24 => out.push_str(&format!("{v:e}")),
             _ => out.push_str(number),
         }
-        rest = &rest[start + len..];
+        at = start + len;
     }
-    out.push_str(rest);
+    out.push_str(&text[at..]);
     out
 }
 
@@ -165,6 +171,8 @@ mod tests {
         assert_eq!(shown(f64::MAX), format!("{:e}", f64::MAX));
         assert_eq!(shown(f64::MAX).parse::<f64>().unwrap(), f64::MAX);
         for kept in [
+            "/tmp/run_20261129181500123456789/frame.exr",
+            "a-1000000000000000000000000000",
             "0.25",
             "100000",
             "u64::MAX 18446744073709551615",
