@@ -148,12 +148,12 @@ impl Cube {
     /// all zero, a largest |value| under [`FRAME_MIN`]; "pixel (x, y) …" ("[k]: pixel …" when it
     /// has planes). One pass over the values when there is none.
     pub fn frame_problem(&self) -> Option<String> {
-        let limit = FRAME_SUM_MAX / (self.width * self.height).max(1) as f32;
+        let n = (self.width * self.height).max(1);
+        let limit = FRAME_SUM_MAX / n as f32;
         let largest = largest_magnitude(&self.data);
         if largest.is_some_and(|m| m <= limit && (m == 0.0 || m >= FRAME_MIN)) {
             return None;
         }
-        let n = (self.width * self.height).max(1);
         let at = |p: usize| {
             let (k, x, y) = (p / n, p % self.width, (p % n) / self.width);
             let plane = if self.planes > 1 {

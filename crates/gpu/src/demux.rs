@@ -132,8 +132,8 @@ impl GpuDemux {
         })
     }
 
-    /// Check a frame (one plane of this size, finite and in range, as `Demux::run` requires) and copy it to
-    /// the GPU.
+    /// Check a frame (one plane of this size, finite and in range, as `Demux::run` requires) and
+    /// copy it to the GPU.
     pub fn upload(&self, ctx: &GpuContext, frame: &Cube) -> Result<()> {
         if frame.planes != 1 || frame.width != self.w || frame.height != self.h {
             return Err(GpuError::Shape(format!(

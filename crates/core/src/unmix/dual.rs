@@ -18,7 +18,7 @@ use crate::error::Result;
 pub const MAX_BASIS: usize = 8;
 /// Largest number of bands (constraints) in the per-pixel solver.
 pub const MAX_BANDS: usize = 64;
-/// Active-set iterations allowed per pixel before [`BandQp::solve`] gives up.
+/// Active-set iterations allowed per pixel before the solver gives up with an error.
 pub const MAX_ITERATIONS: usize = 500;
 /// Bands per register block of the solver's band sums ([`band_blocks`]).
 pub(super) const BAND_BLOCK: usize = 8;
@@ -29,6 +29,7 @@ type Vector = [f64; MAX_BASIS];
 /// 1/‖b_k‖_{H⁻¹}, for J basis vectors and m bands.
 #[derive(Clone, Debug)]
 pub(super) struct BandQp {
+    /// J and the number of bands (the `Unmixer`'s, which holds this).
     pub(super) n: usize,
     pub(super) m: usize,
     /// G by rows, each zero-padded to `MAX_BANDS`: the band values' response to the multipliers.
