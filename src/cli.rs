@@ -118,7 +118,7 @@ pub enum Command {
         size: Option<usize>,
         /// Dithering study instead: every dither × illumination at these pinhole radii (µm,
         /// comma-separated), the experiment's other optics kept (study.md, study.json).
-        #[arg(long, value_delimiter = ',')]
+        #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
         study: Option<Vec<f64>>,
     },
     /// Timing report: the weight matrix w_ik of one exposure, the operator's warnings and a

@@ -228,6 +228,39 @@ fn values_at_the_ends_of_the_f64_range_are_shown_in_exponent_form() {
 }
 
 #[test]
+fn a_negative_number_after_a_flag_reaches_its_check() {
+    let scratch = tmpdir("bad-negative-flag");
+    let d = scratch.path();
+    for (args, must) in [
+        (
+            &["design", "filters", "--electrons", "-5", "--size", "32"][..],
+            &["--electrons", "= -5", "must be positive"][..],
+        ),
+        (
+            &[
+                "patterns",
+                "scenes/prototype.toml",
+                "--size",
+                "32",
+                "--study",
+                "-3,5",
+            ][..],
+            &["rig.fourier_filter.pinhole_radius_um", "= -3"][..],
+        ),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_specmux"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(args)
+            .arg("--out")
+            .arg(d.join("out"))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_one_line_error(out.status.success(), &err, must);
+    }
+}
+
+#[test]
 fn a_timing_that_needs_a_faster_dmd_is_refused() {
     let scratch = tmpdir("bad-dmdrate");
     let d = scratch.path();

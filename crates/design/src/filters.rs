@@ -38,7 +38,7 @@ pub struct FilterArgs {
     #[arg(long, value_delimiter = ',')]
     pub keep: Vec<String>,
     /// Light level of the noise criterion: electrons at a white target's frame peak.
-    #[arg(long, default_value_t = 10000.0)]
+    #[arg(long, default_value_t = 10000.0, allow_negative_numbers = true)]
     pub electrons: f64,
     /// Sets listed per criterion.
     #[arg(long, default_value_t = 5)]
