@@ -143,6 +143,25 @@ def test_from_file_and_dict(tmp_path):
         specmux.Experiment.from_file(str(tmp_path / "missing.toml"))
 
 
+def test_a_dict_is_read_as_the_toml_file_would_be():
+    # numpy values are numbers and lists; NaN reaches the key's own check, as in a file.
+    e = specmux.Experiment.from_dict({"scene": {"size": np.array([48, 48]), "seed": np.int64(3)},
+                                      "reconstruct": {"eta": np.float32(5.0)}})
+    assert e.size == (48, 48) and e.to_dict()["reconstruct"]["eta"] == 5.0
+    for d, words in [
+        ({"reconstruct": {"eta": float("nan")}}, ["<dict>: `reconstruct.eta` = NaN", "finite"]),
+        ({"scene": {"seed": object()}}, ["<dict>: `scene.seed` = <object", "not a value a TOML file holds"]),
+        ({"scene": {"seed": 2**80}}, ["`scene.seed` = 1208925819614629174706176", "64 bits"]),
+        ({"scene": {"size": [64, None]}}, ["`scene.size[1]` = None", "cannot hold None"]),
+        ({1: {}}, ["<dict>: the key 1 is not a string"]),
+    ]:
+        with pytest.raises(specmux.SpecmuxError) as err:
+            specmux.Experiment.from_dict(d)
+        for w in words:
+            assert w in str(err.value), (w, str(err.value))
+        assert "SpecmuxError" not in str(err.value) and "\n" not in str(err.value)
+
+
 def test_to_dict_reads_back_to_the_same_experiment():
     # The prototype's method is "auto": the counts it chooses are not written back.
     for e in (specmux.Experiment.prototype(size=32), specmux.Experiment.from_dict({"rig": {"sensor": {}}})):

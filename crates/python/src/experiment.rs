@@ -2,6 +2,7 @@
 //! reconstruction) from a file, TOML text, a dict or the built-in prototype.
 
 use crate::error::err;
+use crate::toml_value::table;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use specmux_twin::Experiment;
@@ -37,13 +38,10 @@ impl PyExperiment {
     /// (`{"scene": {"size": [64, 64]}, "rig": {...}}`); absent keys take their defaults.
     #[staticmethod]
     #[pyo3(signature = (d, file = "<dict>"))]
-    fn from_dict(py: Python<'_>, d: &Bound<'_, PyDict>, file: &str) -> PyResult<Self> {
-        let text: String = py.import("json")?.call_method1("dumps", (d,))?.extract()?;
-        let bad = |x: &dyn std::fmt::Display| err(format!("{file}: {x}"));
+    fn from_dict(d: &Bound<'_, PyDict>, file: &str) -> PyResult<Self> {
         // Read as the same TOML file would be (which keys it wrote, an EXR scene's geometry,
         // the auto table).
-        let value: serde_json::Value = serde_json::from_str(&text).map_err(|x| bad(&x))?;
-        let doc = toml::Table::try_from(without_nulls(value)).map_err(|x| bad(&x))?;
+        let doc = table(d, file, "")?;
         Ok(PyExperiment {
             inner: Experiment::from_table(&doc, file).map_err(err)?,
         })
@@ -108,19 +106,5 @@ impl PyExperiment {
             self.inner.scene.size[0],
             self.inner.scene.size[1]
         )
-    }
-}
-
-/// The value with every `null` member of an object left out: TOML has no null, and an absent
-/// key is what `None` means.
-fn without_nulls(v: serde_json::Value) -> serde_json::Value {
-    match v {
-        serde_json::Value::Object(m) => m
-            .into_iter()
-            .filter(|(_, x)| !x.is_null())
-            .map(|(k, x)| (k, without_nulls(x)))
-            .collect(),
-        serde_json::Value::Array(a) => a.into_iter().map(without_nulls).collect(),
-        other => other,
     }
 }

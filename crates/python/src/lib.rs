@@ -17,6 +17,7 @@ mod experiment;
 mod reconstruct;
 mod rehearse;
 mod simulate;
+mod toml_value;
 
 use pyo3::prelude::*;
 use specmux_core::spectral::Library;
