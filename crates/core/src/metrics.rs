@@ -60,6 +60,12 @@ fn flags(estimate: &Cube, (lo, hi): (f32, f32), sam_undefined: usize) -> Vec<Str
 /// Compare an estimate with the truth (same shape).
 pub fn compare(truth: &Cube, estimate: &Cube) -> Result<Metrics> {
     estimate.check_same_shape(truth, "estimate against truth")?;
+    if truth.data.is_empty() {
+        return Err(Error::Shape(format!(
+            "comparing empty cubes ({}×{}×{}): no pixel to measure",
+            truth.width, truth.height, truth.planes
+        )));
+    }
     let (t, e) = (value_range(&truth.data), value_range(&estimate.data));
     let (Some((_, peak)), Some(est_range)) = (t, e) else {
         return Err(Error::Numerical(
@@ -544,6 +550,10 @@ mod tests {
         let m = compare(&t, &t).unwrap();
         assert_eq!(m.exact_planes, 1);
         assert!(m.psnr_db.is_infinite() && m.ssim == 1.0);
+        // No pixel: said so, not "the truth's peak is -inf".
+        let empty = Cube::zeros(0, 4, 3);
+        let e = compare(&empty, &empty).unwrap_err().to_string();
+        assert!(e.contains("comparing empty cubes (0×4×3)"), "{e}");
     }
 
     proptest! {
