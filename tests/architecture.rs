@@ -136,7 +136,7 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
         "python",
         &[
             &["error"],
-            &["convert"],
+            &["convert", "toml_value"],
             &["experiment", "calibration"],
             &["simulate", "reconstruct", "design", "rehearse"],
         ],
