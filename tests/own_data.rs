@@ -211,9 +211,14 @@ fn built_in_scene_names_work_in_every_command_and_a_bad_size_names_the_flag() {
 
 /// A 48 × 32 cube of 16 bands 450–600 nm, channels named as specmux names them.
 fn write_cube(path: &Path) -> Cube {
+    write_cube_times(path, 1.0)
+}
+
+/// [`write_cube`] with every value times `k`.
+fn write_cube_times(path: &Path, k: f32) -> Cube {
     let (w, h, n) = (48, 32, 16);
     let data = (0..w * h * n)
-        .map(|i| 0.2 + 0.6 * ((i % 97) as f32 / 97.0))
+        .map(|i| k * (0.2 + 0.6 * ((i % 97) as f32 / 97.0)))
         .collect();
     let cube = Cube::from_vec(w, h, n, data).unwrap();
     let names: Vec<String> = (0..n)
@@ -221,6 +226,49 @@ fn write_cube(path: &Path) -> Cube {
         .collect();
     specmux_io::exr::write(path, &cube, &names).unwrap();
     cube
+}
+
+#[test]
+fn an_exr_scene_of_negative_or_overflowing_light_is_refused_by_its_key() {
+    let scratch = tmpdir("own-extreme-cube");
+    let d = scratch.path();
+    for (name, k, must) in [
+        (
+            "neg",
+            -1.0,
+            &[
+                "neg.exr",
+                "pixel (0, 0) of channel `0450.0nm` is -0.2",
+                "a radiance cannot be negative",
+            ][..],
+        ),
+        // Finite values whose light overflows f32 on the way to the camera.
+        (
+            "huge",
+            3e38,
+            &[
+                "`scene.source` = exr:huge.exr",
+                "overflows f32 at pixel (0, 0)",
+                "scale the scene",
+            ][..],
+        ),
+        // A frame beyond what the reconstruction's FFT holds: named by the scene, not "NaN".
+        (
+            "big",
+            1e35,
+            &[
+                "`scene.source` = exr:big.exr",
+                "out of range: pixel (0, 0) is 2.400655e35",
+                "±6.5e32",
+            ][..],
+        ),
+    ] {
+        write_cube_times(&d.join(format!("{name}.exr")), k);
+        let exp = format!("{name}.toml");
+        let toml = format!("[scene]\nsource = \"exr:{name}.exr\"\nquantity = \"radiance\"\n");
+        std::fs::write(d.join(&exp), toml).unwrap();
+        refused(d, &["demo", "--scene", &exp, "--out", "o"], must);
+    }
 }
 
 #[test]

@@ -21,6 +21,7 @@ use crate::sensor::Sensor;
 use crate::sensor::SensorConfig;
 use crate::timing;
 use crate::timing::TimingConfig;
+use specmux_core::error::Error;
 use specmux_core::error::Result;
 use specmux_core::Carrier;
 use specmux_core::Cube;
@@ -282,6 +283,7 @@ impl Pipeline {
             patterns: &patterns,
         };
         let frame = timed(&mut times, &self.multiplex, &modulated)?;
+        self.scene.check_light(&frame.y)?;
         let full_scale = frame.full_scale;
         let (frame, raw) = match &self.sensor {
             Some(s) => (timed(&mut times, s, &frame)?, true),
@@ -387,6 +389,26 @@ struct SceneStage {
     cfg: SceneConfig,
     file: String,
     materials: Materials,
+}
+
+impl SceneStage {
+    /// The light the scene sends to the camera, refused by `scene.source` where it overflows f32
+    /// (a scene's values near f32's largest); the sensor and the reconstruction need it finite.
+    fn check_light(&self, light: &Cube) -> Result<()> {
+        match light.data.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(p) => Err(Error::config(
+                &self.file,
+                "scene.source",
+                &self.cfg.source,
+                &format!(
+                    "the light on the camera overflows f32 at pixel ({}, {}): scale the scene's values down",
+                    p % light.width,
+                    p / light.width
+                ),
+            )),
+        }
+    }
 }
 
 impl Stage for SceneStage {

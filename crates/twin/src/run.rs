@@ -18,7 +18,7 @@ use specmux_core::reconstructor::{Reconstruction, Reconstructor};
 use specmux_core::spectral::basis::BasisFit;
 use specmux_core::spectral::Library;
 use specmux_core::unmix::UnmixStats;
-use specmux_core::{Cube, Result};
+use specmux_core::{Cube, Error, Result};
 use std::time::Instant;
 
 /// One row of the result table: an estimate against its truth, and what it cost.
@@ -317,6 +317,15 @@ pub fn run_in(
     let t = Instant::now();
     let recon = reconstructor(exp, &rig, &sim, cache)?;
     let t_setup = t.elapsed().as_secs_f64();
+    if let Some(why) = sim.frame.frame_problem() {
+        let reason = format!("the camera's frame of this scene is out of range: {why}");
+        return Err(Error::config(
+            &exp.file,
+            "scene.source",
+            &exp.scene.source,
+            &reason,
+        ));
+    }
     let out = recon.run(&sim.frame, Some(&sim.exposed))?;
     let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;
     let saturation = match &exp.rig.sensor {

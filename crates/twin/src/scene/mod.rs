@@ -173,6 +173,18 @@ fn exr_scene(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Scene> {
     if !cube.all_finite() {
         return Err(err("contains NaN or infinite values".into()));
     }
+    if let Some(p) = cube.data.iter().position(|&v| v < 0.0) {
+        let n = cube.width * cube.height;
+        let (k, x, y) = (p / n, p % cube.width, (p % n) / cube.width);
+        let what = match cfg.quantity {
+            Quantity::Reflectance => "a reflectance",
+            Quantity::Radiance => "a radiance",
+        };
+        return Err(err(format!(
+            "pixel ({x}, {y}) of channel `{}` is {}: {what} cannot be negative",
+            names[k], cube.data[p]
+        )));
+    }
     Ok(Scene {
         name: rel.to_string(),
         cube,
