@@ -314,9 +314,6 @@ pub fn run_in(
     let rig = Rig::build(exp, lib, &materials)?;
     let pipeline = Pipeline::build(exp, &rig, &materials)?.with_pattern_cache(cache.cloned());
     let (sim, forward_stages) = pipeline.run()?;
-    let t = Instant::now();
-    let recon = reconstructor(exp, &rig, &sim, cache)?;
-    let t_setup = t.elapsed().as_secs_f64();
     if let Some(why) = sim.frame.frame_problem() {
         let reason = format!("the camera's frame of this scene is out of range: {why}");
         return Err(Error::config(
@@ -326,6 +323,9 @@ pub fn run_in(
             &reason,
         ));
     }
+    let t = Instant::now();
+    let recon = reconstructor(exp, &rig, &sim, cache)?;
+    let t_setup = t.elapsed().as_secs_f64();
     let out = recon.run(&sim.frame, Some(&sim.exposed))?;
     let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;
     let saturation = match &exp.rig.sensor {
