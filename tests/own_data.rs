@@ -131,6 +131,11 @@ fn reconstruct_refuses_a_frame_without_its_experiment_and_frames_it_cannot_read(
         ],
         &["demo/frame.png", "16-bit"],
     );
+    // A path that is not there is said so, with or without an extension.
+    for missing in ["no/such/frame", "no/such/frame.exr"] {
+        let args = ["reconstruct", missing, "--experiment", "dead-leaves"];
+        refused(d, &args, &[missing, "No such file"]);
+    }
     // A TIFF that is not one (a truncated header) names the file.
     std::fs::write(d.join("frame.tif"), b"II*\0").unwrap();
     refused(

@@ -21,6 +21,8 @@ fn extension(path: &Path) -> String {
 /// One camera frame, checked finite and within the range the reconstruction takes
 /// ([`Cube::frame_problem`]).
 pub fn read(path: &Path) -> Result<Cube> {
+    // A path that is not there is said so, whatever its extension.
+    std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
     let bad = |msg: String| Error::Exr {
         path: path.to_path_buf(),
         msg,

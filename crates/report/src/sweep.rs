@@ -86,6 +86,29 @@ pub fn with_values(base: &Experiment, set_to: &[(String, toml::Value)]) -> Resul
     Experiment::from_table(&doc, &format!("{} with {}", base.file, label.join(", ")))
 }
 
+/// Each key swept once, and none inside another swept key (`rig.sensor.bits` with
+/// `rig.sensor`): the later one would overwrite the earlier's values, and the table would name
+/// runs that did not happen.
+fn check_distinct(vary: &[Vary]) -> Result<()> {
+    let inside = |a: &str, b: &str| a == b || a.starts_with(&format!("{b}."));
+    for (i, v) in vary.iter().enumerate() {
+        if let Some(o) = vary[..i]
+            .iter()
+            .find(|o| inside(&v.key, &o.key) || inside(&o.key, &v.key))
+        {
+            let why = match v.key == o.key {
+                true => format!(
+                    "{} is swept twice; give all its values in one --vary",
+                    v.key
+                ),
+                false => format!("{} and {} overlap: sweep one of them", o.key, v.key),
+            };
+            return Err(Error::config("<command line>", "--vary", &v.key, &why));
+        }
+    }
+    Ok(())
+}
+
 /// Every combination of the swept values (the last key varies fastest).
 pub fn grid(vary: &[Vary]) -> Vec<Vec<(String, toml::Value)>> {
     vary.iter().fold(vec![Vec::new()], |acc, v| {
@@ -122,6 +145,7 @@ pub struct SweepRow {
 /// from point to point (in `$SPECMUX_PATTERN_CACHE`, else in memory), so a point that leaves the
 /// rig as it was runs no optical stage and captures nothing again.
 pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<SweepRow>> {
+    check_distinct(vary)?;
     let cache = PatternCache::from_env()?.unwrap_or_else(PatternCache::in_memory);
     let mut rows = Vec::new();
     let points = grid(vary);
@@ -229,6 +253,20 @@ mod tests {
         assert_eq!(g.len(), 6);
         assert_eq!(g[1][0].1, toml::Value::Integer(1));
         assert_eq!(g[1][1].1, toml::Value::String("y".into()));
+    }
+
+    #[test]
+    fn a_key_swept_twice_or_inside_another_is_refused() {
+        let v = |a: &str| Vary::parse(a).unwrap();
+        assert!(check_distinct(&[v("a.b=1"), v("a.c=2"), v("a.bc=3")]).is_ok());
+        let e = check_distinct(&[v("a.b=1;2"), v("c=1"), v("a.b=3")]).unwrap_err();
+        assert!(e.to_string().contains("a.b is swept twice"), "{e}");
+        let e = check_distinct(&[v("rig.sensor.bits=10"), v("rig.sensor={}")]).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("rig.sensor.bits and rig.sensor overlap"),
+            "{e}"
+        );
     }
 
     #[test]
