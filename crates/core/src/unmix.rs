@@ -898,7 +898,7 @@ mod tests {
         let cold_info = SolveInfo::new(steps, &empty);
         let (steps, _) = u.solve(x, &mut warmed, warm).unwrap();
         let info = SolveInfo::new(steps, warm);
-        // The solver's own scale: the largest unconstrained band value (`dual_active_set`).
+        // The solver's own scale: the largest unconstrained band value (`BandQp::solve`).
         let mut unconstrained = [0.0; MAX_BANDS];
         u.spectrum(&u.unconstrained_alpha(x)[..u.n], &mut unconstrained);
         let scale = unconstrained.iter().fold(0.0f64, |m, v| m.max(v.abs()));

@@ -10,12 +10,7 @@ use toml::Value;
 /// `obj` at key path `path` of the dict named `file` as a TOML value; None for Python's None (the
 /// key is absent). Lists, tuples and numpy arrays become arrays, numpy scalars Python's numbers.
 fn toml_value(obj: &Bound<'_, PyAny>, file: &str, path: &str) -> PyResult<Option<Value>> {
-    let refuse = |why: &str| -> PyErr {
-        let shown = obj
-            .repr()
-            .map_or_else(|_| "?".to_string(), |r| r.to_string());
-        err(format!("{file}: `{path}` = {shown}: {why}"))
-    };
+    let refuse = |why: &str| err(format!("{file}: `{path}` = {}: {why}", repr(obj)));
     if obj.is_none() {
         return Ok(None);
     }
@@ -54,7 +49,7 @@ pub fn table(d: &Bound<'_, PyDict>, file: &str, path: &str) -> PyResult<toml::Ta
     let mut t = toml::Table::new();
     for (k, v) in d.iter() {
         let Ok(key) = k.extract::<String>() else {
-            let key = k.repr().map_or_else(|_| "?".to_string(), |r| r.to_string());
+            let key = repr(&k);
             let at = if path.is_empty() {
                 String::new()
             } else {
@@ -89,4 +84,10 @@ fn array(obj: &Bound<'_, PyAny>, file: &str, path: &str) -> PyResult<Value> {
         }
     }
     Ok(Value::Array(items))
+}
+
+/// `obj` as Python writes it (`repr`), for an error.
+fn repr(obj: &Bound<'_, PyAny>) -> String {
+    obj.repr()
+        .map_or_else(|_| "?".to_string(), |r| r.to_string())
 }

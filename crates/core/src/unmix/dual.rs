@@ -49,7 +49,7 @@ const DEPENDENT: f64 = 1e-13;
 /// The working set: its bands, their multipliers and the factor G_AA = L D Lᵀ (L unit lower
 /// triangular), whose solves divide only by D, independently of each other, where a Cholesky
 /// factor's divisions by its diagonal sit on the solves' chain of multiply-adds. A pixel's final
-/// set is the next pixel's start (`Unmixer::dual_active_set`).
+/// set is the next pixel's start (`BandQp::solve`).
 #[derive(Clone, Copy)]
 pub(super) struct WorkingSet {
     /// L below its unit diagonal, q × q, row-major: `l[i][k]`, k < i.
