@@ -30,6 +30,11 @@ fn largest_magnitude(x: &[f32]) -> Option<f32> {
     finite.then_some(m)
 }
 
+/// True when every value of `x` is finite ([`largest_magnitude`]'s vectorised pass).
+pub(crate) fn all_finite(x: &[f32]) -> bool {
+    largest_magnitude(x).is_some()
+}
+
 /// `v` as written when it is a plain size, in exponent form when it is large or small.
 fn plain_or_exponent(v: f32) -> String {
     match v.abs() {
@@ -140,29 +145,31 @@ impl Cube {
 
     /// True when every value is finite.
     pub fn all_finite(&self) -> bool {
-        self.data.iter().all(|v| v.is_finite())
+        all_finite(&self.data)
     }
 
     /// Why this cube cannot be a frame (or a calibration frame) that the reconstruction takes
     /// in: a value that is not finite, or beyond ±[`FRAME_SUM_MAX`] / (width·height), or, not
-    /// all zero, a largest |value| under [`FRAME_MIN`]; "pixel (x, y) …" ("[k]: pixel …" when it
-    /// has planes). One pass over the values when there is none.
-    pub fn frame_problem(&self) -> Option<String> {
+    /// all zero, a largest |value| under [`FRAME_MIN`]; "`what`: pixel (x, y) …" ("`what`[k]:
+    /// pixel …" when it has planes; without `what`: and the colon when it is empty). One pass
+    /// over the values when there is none.
+    pub fn frame_problem(&self, what: &str) -> Option<String> {
         let n = (self.width * self.height).max(1);
         let limit = FRAME_SUM_MAX / n as f32;
         let largest = largest_magnitude(&self.data);
         if largest.is_some_and(|m| m <= limit && (m == 0.0 || m >= FRAME_MIN)) {
             return None;
         }
+        let named = |plane: Option<usize>| match (what, plane) {
+            ("", None) => String::new(),
+            (_, None) => format!("{what}: "),
+            (_, Some(k)) => format!("{what}[{k}]: "),
+        };
         let at = |p: usize| {
             let (k, x, y) = (p / n, p % self.width, (p % n) / self.width);
-            let plane = if self.planes > 1 {
-                format!("[{k}]: ")
-            } else {
-                String::new()
-            };
+            let name = named((self.planes > 1).then_some(k));
             format!(
-                "{plane}pixel ({x}, {y}) is {}",
+                "{name}pixel ({x}, {y}) is {}",
                 plain_or_exponent(self.data[p])
             )
         };
@@ -175,7 +182,7 @@ impl Cube {
             return Some(format!("{}: a {w}×{h} frame's values must lie within ±{limit:.1e} (its Fourier transform sums them, and f32 ends at 3.4e38); {scale}", at(p)));
         }
         let m = largest.unwrap_or(0.0);
-        Some(format!("its largest |value| is {m:e}, under {FRAME_MIN:e} (the reconstruction's f32 products would leave the normal range); {scale}"))
+        Some(format!("{}its largest |value| is {m:e}, under {FRAME_MIN:e} (the reconstruction's f32 products would leave the normal range); {scale}", named(None)))
     }
 
     /// Plane k multiplied by `k_per_plane[k]`.
@@ -282,7 +289,7 @@ mod tests {
     #[test]
     fn a_frame_must_be_finite_and_within_the_range_its_transform_holds() {
         let frame = |w: usize, v: &[f32]| Cube::from_vec(w, w, v.len() / (w * w), v.to_vec());
-        let why = |w: usize, v: &[f32]| frame(w, v).unwrap().frame_problem();
+        let why = |w: usize, v: &[f32]| frame(w, v).unwrap().frame_problem("");
         // 2 × 2: values up to 1e36 / 4.
         assert_eq!(why(2, &[0.0; 4]), None);
         assert_eq!(why(2, &[2.5e35, -2.5e35, 1e-30, 0.0]), None);
@@ -299,6 +306,12 @@ mod tests {
         );
         assert!(refused(2, &[0.0, 9e-31, 0.0, -1e-35])
             .starts_with("its largest |value| is 9e-31, under 1e-30"));
+        // A name leads the message: "name: pixel …", "name[k]: pixel …", "name: its largest …".
+        let named = |v: &[f32]| frame(2, v).unwrap().frame_problem("flat").unwrap();
+        assert!(named(&[1.0, 2.0, 3.0, f32::NAN]).starts_with("flat: pixel (1, 1) is NaN"));
+        assert!(named(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, f32::INFINITY, 0.0])
+            .starts_with("flat[1]: pixel (0, 1) is inf"));
+        assert!(named(&[0.0, 9e-31, 0.0, 0.0]).starts_with("flat: its largest |value| is 9e-31"));
         // The ninth value lies past the eight lanes: still seen.
         let mut nine = [1.0f32; 9];
         nine[8] = f32::NAN;

@@ -312,8 +312,8 @@ impl Demux {
                 frame.width, frame.height, frame.planes, self.fft.w, self.fft.h
             )));
         }
-        if let Some(why) = frame.frame_problem() {
-            return Err(Error::Numerical(format!("frame: {why}")));
+        if let Some(why) = frame.frame_problem("frame") {
+            return Err(Error::Numerical(why));
         }
         let spec = self.spectrum(&frame.data);
         out.planes_mut()

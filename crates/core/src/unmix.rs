@@ -11,6 +11,7 @@
 // `!(x > y)` is deliberate: it is true for NaN too. The small dense kernels index by position.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
+use crate::cube::all_finite;
 use crate::error::Error;
 use crate::error::Result;
 use crate::Cube;
@@ -687,21 +688,6 @@ fn store_fence() {
     unsafe {
         std::arch::x86_64::_mm_sfence()
     };
-}
-
-/// True when every value is finite, by a lane-wise sum of `v − v` (0 for finite values, NaN
-/// otherwise) that the compiler can vectorise.
-#[allow(clippy::eq_op)]
-fn all_finite(x: &[f32]) -> bool {
-    let mut lanes = [0.0f32; 8];
-    let chunks = x.chunks_exact(8);
-    let rest = chunks.remainder();
-    for ch in chunks {
-        for (l, &v) in lanes.iter_mut().zip(ch) {
-            *l += v - v;
-        }
-    }
-    lanes.iter().all(|&l| l == 0.0) && rest.iter().all(|v| v.is_finite())
 }
 
 #[cfg(test)]

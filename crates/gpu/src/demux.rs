@@ -141,8 +141,8 @@ impl GpuDemux {
                 frame.width, frame.height, frame.planes, self.w, self.h
             )));
         }
-        if let Some(why) = frame.frame_problem() {
-            return Err(GpuError::Numerical(format!("frame: {why}")));
+        if let Some(why) = frame.frame_problem("frame") {
+            return Err(GpuError::Numerical(why));
         }
         ctx.queue
             .write_buffer(&self.frame, 0, bytemuck::cast_slice(&frame.data));

@@ -38,7 +38,7 @@ pub fn read(path: &Path) -> Result<Cube> {
             frame.planes
         )));
     }
-    match frame.frame_problem() {
+    match frame.frame_problem("") {
         Some(why) => Err(bad(why)),
         None => Ok(frame),
     }

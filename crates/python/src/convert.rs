@@ -89,9 +89,8 @@ pub fn check_frame(f: &Cube, what: &str, size: Option<(usize, usize)>) -> PyResu
             f.width, f.height
         )));
     }
-    match f.frame_problem() {
-        Some(why) if why.starts_with('[') => Err(err(format!("{what}{why}"))),
-        Some(why) => Err(err(format!("{what}: {why}"))),
+    match f.frame_problem(what) {
+        Some(why) => Err(err(why)),
         None => Ok(()),
     }
 }

@@ -314,7 +314,7 @@ pub fn run_in(
     let rig = Rig::build(exp, lib, &materials)?;
     let pipeline = Pipeline::build(exp, &rig, &materials)?.with_pattern_cache(cache.cloned());
     let (sim, forward_stages) = pipeline.run()?;
-    if let Some(why) = sim.frame.frame_problem() {
+    if let Some(why) = sim.frame.frame_problem("") {
         let reason = format!("the camera's frame of this scene is out of range: {why}");
         return Err(Error::config(
             &exp.file,
