@@ -143,6 +143,17 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     ),
 ];
 
+/// Import cycles that are known and kept, each with its reason: (crate, the module whose files
+/// the cycle stays within, why). The test fails on any other cycle, and on an entry no cycle
+/// matches any more (so the list cannot outlive what it excuses).
+const KNOWN_CYCLES: &[(&str, &str, &str)] = &[(
+    "controller",
+    "sim",
+    "one discrete-event bench: `Bench` (sim/mod.rs) holds the three simulated devices, and each \
+     device's file adds the bench's handlers for its events (`impl Bench`), which read the other \
+     devices' state; splitting them needs the devices to talk through events only",
+)];
+
 /// Crates that `crates/core` must not depend on.
 const FORBIDDEN_IN_CORE: &[&str] = &[
     "specmux-twin",
@@ -161,6 +172,8 @@ struct UseStmt {
     line: usize,
     text: String,
     is_pub: bool,
+    /// A path named in code (`child::Type` in a field), not a `use` line.
+    inline: bool,
 }
 
 /// One source file of a crate, as a module.
@@ -269,6 +282,7 @@ fn use_statements(text: &str) -> Vec<UseStmt> {
                     line: i + 1,
                     text: path,
                     is_pub: false,
+                    inline: true,
                 });
             }
             i += 1;
@@ -288,30 +302,32 @@ fn use_statements(text: &str) -> Vec<UseStmt> {
                 line: start + 1,
                 text: stmt,
                 is_pub,
+                inline: false,
             });
         }
     }
     out
 }
 
-/// The paths a line of code names inline (`crate::a::f(…)`, `super::b::C`): dependencies as
-/// real as a `use`.
+/// The paths a line of code names inline (`crate::a::f(…)`, `super::b::C`, `child::D` for a
+/// child module of the file): dependencies as real as a `use`. Every `name::…` path is taken;
+/// `resolve` keeps those that start at `crate`, `super`, `self` or a child module.
 fn inline_paths(line: &str) -> Vec<String> {
     let code = strip_comment(line);
+    let is_path_char = |c: char| c.is_alphanumeric() || c == '_' || c == ':';
     let mut out = Vec::new();
-    for start in ["crate::", "super::"] {
-        let mut rest = code;
-        while let Some(i) = rest.find(start) {
-            let standalone = !rest[..i].ends_with(|c: char| c.is_alphanumeric() || c == '_');
-            let tail = &rest[i..];
-            let end = tail
-                .find(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':'))
-                .unwrap_or(tail.len());
-            if standalone {
-                out.push(tail[..end].trim_end_matches(':').to_string());
-            }
-            rest = &tail[end..];
+    let mut rest = code;
+    while let Some(i) = rest.find("::") {
+        let start = rest[..i]
+            .rfind(|c: char| !is_path_char(c))
+            .map_or(0, |k| k + 1);
+        let tail = &rest[start..];
+        let end = tail.find(|c: char| !is_path_char(c)).unwrap_or(tail.len());
+        let path = tail[..end].trim_end_matches(':');
+        if !path.starts_with(':') && path.contains("::") {
+            out.push(path.to_string());
         }
+        rest = &tail[end..];
     }
     out
 }
@@ -498,7 +514,10 @@ fn edges(krate: &Crate) -> Vec<Edge> {
                         from: file.module.clone(),
                         to,
                         line: stmt.line,
-                        text: format!("use {};", stmt.text),
+                        text: match stmt.inline {
+                            true => format!("`{}` (named in code)", stmt.text),
+                            false => format!("use {};", stmt.text),
+                        },
                     });
                 }
             }
@@ -679,12 +698,28 @@ fn crates_with_edges() -> Vec<(Crate, Vec<Edge>)> {
 }
 
 /// Rule 1: no crate has an import cycle between its files.
+/// The entry of [`KNOWN_CYCLES`] that keeps this cycle of `krate`, if one does: every module of
+/// the cycle lies within the entry's module.
+fn known_cycle(krate: &Crate, component: &[ModPath]) -> Option<usize> {
+    KNOWN_CYCLES.iter().position(|(name, within, _)| {
+        *name == krate.name
+            && component
+                .iter()
+                .all(|m| m.first().is_some_and(|t| t == within))
+    })
+}
+
 #[test]
 fn no_import_cycle_between_the_files_of_a_crate() {
     let mut report = String::new();
+    let mut kept = BTreeSet::new();
     for (krate, edges) in crates_with_edges() {
         let graph = graph_of(&krate, &edges);
         for component in cycles_of(&graph) {
+            if let Some(k) = known_cycle(&krate, &component) {
+                kept.insert(k);
+                continue;
+            }
             let files: Vec<String> = component.iter().map(|m| file_of(&krate, m)).collect();
             let cycle = shortest_cycle(&graph, &component, &component[0]);
             let names: Vec<String> = cycle.iter().chain([&cycle[0]]).map(show).collect();
@@ -703,6 +738,14 @@ fn no_import_cycle_between_the_files_of_a_crate() {
                 );
             }
             let _ = writeln!(report, "  files in the cycle: {}", files.join(", "));
+        }
+    }
+    for (k, (name, within, _)) in KNOWN_CYCLES.iter().enumerate() {
+        if !kept.contains(&k) {
+            let _ = writeln!(
+                report,
+                "KNOWN_CYCLES lists a cycle within {name}::{within} that is gone: remove the entry"
+            );
         }
     }
     assert!(report.is_empty(), "\n{report}");
@@ -950,4 +993,27 @@ fn the_checker_reads_groups_super_reexports_and_test_modules() {
     let toml = "[package]\nname = \"x\"\n[dependencies]\nserde.workspace = true\nimage = \"0.25\"\n[dev-dependencies]\nexr = \"1\"\n[dependencies.plotters]\nversion = \"0.3\"\n";
     let names: Vec<String> = dependency_names(toml).into_iter().map(|(_, n)| n).collect();
     assert_eq!(names, ["serde", "image", "plotters"]);
+
+    // Paths named in code: a child module's (a field `c::Thing` in `a`) is an edge like a `use`;
+    // a type's (`Vec::new`), another crate's and a qualified path's (`<T as Tr>::f`) are not.
+    let line = "    x: c::Thing, y: Vec::new(), z: std::mem::take(&mut w), f: <T as Tr>::f(),";
+    assert_eq!(
+        inline_paths(line),
+        ["c::Thing", "Vec::new", "std::mem::take"]
+    );
+    let krate = synthetic_crate(
+        &["", "a", "a::c"],
+        &[("a", line), ("a::c", "use super::Y;")],
+    );
+    let found: Vec<(String, String, String)> = edges(&krate)
+        .into_iter()
+        .map(|e| (show(&e.from), show(&e.to), e.text))
+        .collect();
+    let expected = [
+        ("a", "a::c", "`c::Thing` (named in code)"),
+        ("a::c", "a", "use super::Y;"),
+    ];
+    let expected = expected.map(|(f, t, x)| (f.to_string(), t.to_string(), x.to_string()));
+    assert_eq!(found.len(), 2, "{found:?}");
+    assert!(expected.iter().all(|e| found.contains(e)), "{found:?}");
 }

@@ -20,6 +20,7 @@ use std::time::Instant;
 
 pub mod discrepancy;
 mod lane;
+mod method;
 mod pnp;
 mod rows;
 
@@ -341,10 +342,22 @@ pub struct JointStats {
     pub reweight_rounds: usize,
     /// The discrepancy principle's search, when it chose λ.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub discrepancy: Option<discrepancy::Search>,
+    pub discrepancy: Option<Search>,
     /// Plug-and-play: ‖Δz‖² + ‖Δu‖² per ADMM iteration (non-increasing once the guide is frozen).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub fixed_point: Vec<f64>,
+}
+
+/// What the discrepancy principle's λ search tried and what it chose (`discrepancy::choose`).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Search {
+    /// (λ, ρ) of each trial in order, ρ after `search_iterations` warm-started iterations.
+    pub trials: Vec<[f64; 2]>,
+    /// The chosen λ: the trial whose ρ is closest to 1 (in ln).
+    pub lambda: f64,
+    /// True when a trial came within the tolerance (±10 %); false when ρ = 1 is out of reach
+    /// within λ₀·10^±4 or the trials ran out (then the closest was taken).
+    pub reached: bool,
 }
 
 impl JointStats {
@@ -1112,38 +1125,6 @@ impl Joint {
             },
         );
         st.row_sums.iter().sum()
-    }
-
-    /// Run the configured method from `seed` with data weights ω and saturated pixels (None:
-    /// ω = 1, none): TV with λ fixed or by the discrepancy principle, or plug-and-play.
-    pub fn run(
-        &self,
-        frame: &Cube,
-        seed: &Cube,
-        weights: Option<&DataWeights>,
-    ) -> Result<(Cube, JointStats)> {
-        if self.cfg.prior == Prior::Pnp {
-            return pnp::run(self, frame, seed, weights);
-        }
-        let t0 = Instant::now();
-        let mut st = self.start(frame, seed, weights)?;
-        let search = match self.cfg.weight_rule {
-            WeightRule::Fixed => None,
-            WeightRule::Discrepancy if weights.is_none() => {
-                return Err(Error::Numerical(
-                    "joint: the discrepancy principle needs the noise weights ω of a camera noise model".into(),
-                ))
-            }
-            WeightRule::Discrepancy => Some(discrepancy::choose(self, &mut st)?),
-        };
-        let stages = Stages {
-            reweights: self.cfg.rounds(),
-            rebalance: self.cfg.rebalance,
-        };
-        let objective = self.iterate(&mut st, self.cfg.iterations, stages)?;
-        let mut stats = self.finish(&st, objective, t0, weights.is_some())?;
-        stats.discrepancy = search;
-        Ok((st.alpha_cube(), stats))
     }
 
     /// `iterations` Chambolle–Pock steps, the steps rebalanced halfway and the TV weights

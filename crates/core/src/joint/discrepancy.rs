@@ -3,9 +3,9 @@
 //! ρ(λ) = Σω r²/N grows with λ, so a safeguarded secant search on ln ρ against ln λ finds it,
 //! each trial warm started from the previous one's iterate (docs/joint.md, "The λ rule").
 
+pub use super::Search;
 use super::{Joint, JointState};
 use crate::error::{Error, Result};
-use serde::{Deserialize, Serialize};
 
 /// Accept a trial when ρ lies within a factor 1 + TOLERANCE of 1.
 const TOLERANCE: f64 = 0.1;
@@ -15,18 +15,6 @@ pub const MAX_TRIALS: usize = 8;
 const RANGE: f64 = 1e4;
 /// Largest change of ln λ from one trial to the next while one side is unbracketed (×100).
 const MAX_STEP: f64 = 4.605_170_185_988_091;
-
-/// What the search tried and what it chose.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct Search {
-    /// (λ, ρ) of each trial in order, ρ after `search_iterations` warm-started iterations.
-    pub trials: Vec<[f64; 2]>,
-    /// The chosen λ: the trial whose ρ is closest to 1 (in ln).
-    pub lambda: f64,
-    /// True when a trial came within the tolerance (±10 %); false when ρ = 1 is out of reach
-    /// within λ₀·10^±4 or the trials ran out (then the closest was taken).
-    pub reached: bool,
-}
 
 /// Search λ for `st` (λ₀ = its current λ), leaving it set to the choice, warm.
 pub fn choose(j: &Joint, st: &mut JointState) -> Result<Search> {

@@ -5,7 +5,6 @@
 //! is not a nodal value: using it as one would blur every spectrum by the hat a second time.
 
 use crate::scene::Quantity;
-use crate::scene::Scene;
 use crate::scene::SceneConfig;
 use rayon::prelude::*;
 use specmux_core::error::Error;
@@ -210,8 +209,8 @@ pub fn sampled_sensitivity(filter: &Curve, qe: &Curve, lo_nm: u32, hi_nm: u32) -
     Curve::new(format!("{}·QE (1 nm)", filter.name), wl, v)
 }
 
-/// The radiance scene of a `mitsuba:` source: the truth file's nodal cube on the experiment grid.
-pub fn scene(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Scene> {
+/// The radiance of a `mitsuba:` source: the truth file's nodal cube on the experiment grid.
+pub fn cube(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Cube> {
     let rel = cfg.source.trim_start_matches(PREFIX);
     let path = truth_path(&cfg.path(rel, file));
     let means = read_truth(&path, grid)?;
@@ -231,12 +230,7 @@ pub fn scene(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Scene> {
             ),
         ));
     }
-    Ok(Scene {
-        name: cfg.source.clone(),
-        cube: nodal_from_hat_means(&means, grid)?,
-        grid: *grid,
-        quantity: Quantity::Radiance,
-    })
+    nodal_from_hat_means(&means, grid)
 }
 
 #[cfg(test)]
@@ -375,11 +369,11 @@ mod tests {
         let exp_file = dir.join("e.toml").display().to_string();
         let toml = "[scene]\nsource = \"mitsuba:ok\"\nquantity = \"radiance\"\nsize = [32, 32]\n";
         let exp = Experiment::from_toml(toml, &exp_file).unwrap();
-        let e = scene(&exp.scene, &exp.file, &g).unwrap_err().to_string();
+        let e = cube(&exp.scene, &exp.file, &g).unwrap_err().to_string();
         assert!(e.contains("scene.size") && e.contains("16×16"), "{e}");
         let exp = Experiment::from_toml(&toml.replace("32, 32", "16, 16"), &exp_file).unwrap();
-        let s = scene(&exp.scene, &exp.file, &g).unwrap();
-        assert!(s.cube.data.iter().all(|v| (v - 0.5).abs() < 1e-6));
+        let c = cube(&exp.scene, &exp.file, &g).unwrap();
+        assert!(c.data.iter().all(|v| (v - 0.5).abs() < 1e-6));
 
         let e = Experiment::from_toml(&toml.replace("radiance", "reflectance"), &exp_file)
             .unwrap_err()

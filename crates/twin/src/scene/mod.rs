@@ -104,7 +104,17 @@ pub fn build_at(cfg: &SceneConfig, file: &str, materials: &Materials, t_s: f64) 
                 w1 * refl(m1, b) + w2 * refl(m2, b)
             })
         }
-        s if s.starts_with(mitsuba::PREFIX) => return mitsuba::scene(cfg, file, &grid),
+        s if s.starts_with(mitsuba::PREFIX) => {
+            // A render is radiance, whatever the key says (`mitsuba::check` refuses another).
+            let cube = mitsuba::cube(cfg, file, &grid)?;
+            let quantity = Quantity::Radiance;
+            return Ok(Scene {
+                name: src.to_string(),
+                cube,
+                grid,
+                quantity,
+            });
+        }
         _ => return exr_scene(cfg, file, &grid),
     };
     Ok(Scene {
