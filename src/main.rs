@@ -8,6 +8,7 @@ use specmux_controller::commands as controller;
 use specmux_core::spectral::Library;
 use specmux_core::Result;
 use specmux_report::commands;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 /// Print a command's text to stdout; a closed pipe (`specmux demo | head`) ends quietly.
@@ -63,7 +64,67 @@ fn main() -> ExitCode {
     }
 }
 
+/// Refuse, before any work, an `--out` whose replacement would lose files: one holding the
+/// command's inputs, or (for the commands that replace their folder whole) files no run wrote.
+fn check_out(cmd: &Command) -> Result<()> {
+    use specmux_io::output_set::{check_target, inputs_outside};
+    let p = |s: &String| PathBuf::from(s);
+    let (out, inputs): (&Path, Vec<PathBuf>) = match cmd {
+        Command::Demo { scene, out, .. } => (out, vec![p(scene)]),
+        Command::Simulate {
+            experiment, out, ..
+        }
+        | Command::Bench {
+            experiment, out, ..
+        }
+        | Command::Sweep {
+            experiment, out, ..
+        }
+        | Command::Patterns {
+            experiment, out, ..
+        }
+        | Command::Timing { experiment, out } => (out, vec![p(experiment)]),
+        Command::SweepCrop {
+            experiments, out, ..
+        } => (out, experiments.iter().map(p).collect()),
+        Command::Ptc {
+            experiment, out, ..
+        } => (out, experiment.iter().map(p).collect()),
+        Command::Reconstruct {
+            frame,
+            experiment,
+            calibration,
+            truth,
+            out,
+            ..
+        } => {
+            let mut inputs = vec![frame.clone()];
+            inputs.extend(
+                experiment
+                    .iter()
+                    .map(p)
+                    .chain(calibration.clone())
+                    .chain(truth.clone()),
+            );
+            (out, inputs)
+        }
+        // A recording folder is checked by the recorder (new or empty, or a simulated one).
+        Command::Rehearse(a) | Command::Acquire { run: a, .. } => {
+            let default = match cmd {
+                Command::Rehearse(_) => "out/rehearse",
+                _ => "out/acquire",
+            };
+            let out = a.out.clone().unwrap_or_else(|| default.into());
+            return inputs_outside(&out, &[&a.experiment]);
+        }
+        Command::Design { .. } => return Ok(()),
+    };
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    check_target(out, &inputs)
+}
+
 fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> {
+    check_out(&cmd).map_err(|e| e.to_string())?;
     let done: Result<String> = match cmd {
         Command::Demo {
             scene,

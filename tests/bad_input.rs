@@ -367,3 +367,66 @@ fn a_frame_saturated_everywhere_names_the_noise_weights() {
         "outputs appear all at once or not at all"
     );
 }
+
+/// Run `specmux ARGS…` from the repository root; return (success, stderr).
+fn specmux(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_specmux"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.success(), err)
+}
+
+#[test]
+fn an_output_folder_of_other_files_or_of_the_inputs_is_refused_before_any_work() {
+    let scratch = tmpdir("bad-out");
+    let d = scratch.path();
+    let s = |p: &Path| p.display().to_string();
+    // A folder of files no run wrote: refused by name, the file kept.
+    let lab = d.join("lab");
+    std::fs::create_dir(&lab).unwrap();
+    std::fs::write(lab.join("important.txt"), "keep").unwrap();
+    let (ok, err) = specmux(&["demo", "--size", "32", "--out", &s(&lab)]);
+    assert_one_line_error(ok, &err, &["lab", "important.txt", "did not write"]);
+    assert!(lab.join("important.txt").exists());
+    // A run's own folder is replaced by the next run; its frame cannot be reconstructed into it.
+    let sim = d.join("sim");
+    assert!(specmux(&["simulate", "dead-leaves", "--out", &s(&sim)]).0);
+    assert!(specmux(&["simulate", "dead-leaves", "--out", &s(&sim)]).0);
+    let frame = s(&sim.join("frame.exr"));
+    let recon = ["reconstruct", &frame, "--experiment", "dead-leaves"];
+    let (ok, err) = specmux(&[&recon[..], &["--out", &s(&sim)]].concat());
+    assert_one_line_error(ok, &err, &["frame.exr", "an input of this run"]);
+    assert!(sim.join("frame.exr").exists() && sim.join("truth.exr").exists());
+    // A simulated recording is replaced by the next rehearsal, not by an acquisition's files
+    // elsewhere, and not by reconstructing it into itself.
+    let rec = d.join("rec");
+    let rehearse = [
+        "rehearse",
+        "scenes/moving-spheres.toml",
+        "--frames",
+        "2",
+        "--out",
+    ];
+    for _ in 0..2 {
+        let (ok, err) = specmux(&[&rehearse[..], &[&s(&rec)]].concat());
+        assert!(ok, "{err}");
+    }
+    let (ok, err) = specmux(&["reconstruct", &s(&rec), "--out", &s(&rec)]);
+    assert_one_line_error(ok, &err, &["is this run's input"]);
+    assert!(rec.join("frames.ome.tif").exists());
+    let acquire = [
+        "acquire",
+        "scenes/moving-spheres.toml",
+        "--frames",
+        "2",
+        "--out",
+    ];
+    let (ok, err) = specmux(&[&acquire[..], &[&s(&lab)]].concat());
+    assert_one_line_error(ok, &err, &["new or empty folder", "important.txt"]);
+    // The built-in scenes' names are experiments to the controller's commands too.
+    let (ok, err) = specmux(&["rehearse", "dead-leaves", "--frames", "2", "--dry-run"]);
+    assert!(ok, "{err}");
+}

@@ -189,7 +189,7 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 }
 
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
-    let exp = Experiment::load(&o.experiment)?;
+    let exp = experiment_of(o)?;
     let faults = faults(&o.faults, o.frames)?;
     let (plan, text) = rehearsal_plan(&exp, o.frames, out);
     if o.dry_run {
@@ -204,6 +204,14 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let mut text = text + &r.text();
     say!(text, "wrote {}", out.display());
     Ok(text)
+}
+
+/// The experiment of a run: a file or a built-in scene's name, as every command takes them.
+fn experiment_of(o: &RunOptions) -> Result<Experiment> {
+    Ok(specmux_report::commands::experiment_for(
+        &o.experiment.to_string_lossy(),
+        None,
+    )?)
 }
 
 /// The plan of a rehearsal of `frames` frames recorded into `out`, on the twin's devices, with
@@ -252,7 +260,7 @@ pub fn rehearsal(
     let wall = Instant::now();
     let (sim, rig) = SimRig::new(exp, lib, faults)?;
     let mut dev = sim.devices();
-    let recorder = Recorder::create(out, plan, exp)?;
+    let recorder = Recorder::create(out, plan, exp, true)?;
     let mut sink = Rehearsal {
         recorder,
         sim: sim.clone(),
@@ -373,7 +381,7 @@ fn acquire_in(
     out: &Path,
     lib: &Library,
 ) -> Result<String> {
-    let (exp, frames, dry) = (Experiment::load(&o.experiment)?, o.frames, o.dry_run);
+    let (exp, frames, dry) = (experiment_of(o)?, o.frames, o.dry_run);
     let faults = faults(&o.faults, o.frames)?;
     // The real rig is opened (inquiries only) even for a dry run: the plan needs its limits.
     let (real_devices, limits) = match backend {
@@ -405,7 +413,7 @@ fn acquire_in(
         }
     };
     let mut sink = Acquisition {
-        recorder: Recorder::create(out, &plan, &exp)?,
+        recorder: Recorder::create(out, &plan, &exp, sim.is_some())?,
         bar: frame_bar(frames),
     };
     let outcome = run::run(&plan, &mut dev, &mut sink)?;

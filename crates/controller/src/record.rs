@@ -10,6 +10,10 @@
 //! - `plan.json` and `experiment.json` (the experiment as run, so the recording is reconstructed
 //!   with the rig it was taken on) at the start; `events.jsonl` (every device's log) and `acquisition.json` (the
 //!   outcome and its incidents) at the end.
+//!
+//! A recording goes into a new or empty folder. A simulated one (`rehearse`, `acquire --backend
+//! sim`) carries a marker ([`SIMULATED`]) and may be replaced by the next simulated run; a real
+//! one is never replaced.
 
 use crate::devices::Frame;
 use crate::error::{Error, Result};
@@ -23,6 +27,39 @@ use specmux_twin::Experiment;
 use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+/// The file that marks a recording as simulated, which the next simulated run may replace.
+pub const SIMULATED: &str = ".specmux-simulated-recording";
+
+/// Make `dir` the empty folder of a new recording: refused where it holds files, unless they are
+/// a simulated recording and this one is simulated too (then they are removed first).
+fn empty_folder(dir: &Path, simulated: bool) -> Result<()> {
+    let names: Vec<String> = match std::fs::read_dir(dir) {
+        Ok(entries) => (entries.flatten())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    let replaceable = simulated && names.iter().any(|n| n == SIMULATED);
+    if replaceable {
+        std::fs::remove_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    } else if !names.is_empty() {
+        let shown: Vec<&str> = names.iter().take(3).map(String::as_str).collect();
+        let what = match simulated {
+            true => "files that are not a simulated recording",
+            false => "files, and a real acquisition replaces none",
+        };
+        let why = format!("a recording needs a new or empty folder; this one holds {what}: {}{}; pass another --out", shown.join(", "), if names.len() > 3 { ", …" } else { "" });
+        return Err(Error::io(dir, std::io::Error::other(why)));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    if simulated {
+        let marker = dir.join(SIMULATED);
+        let note = "a simulated recording of specmux: the next simulated run with this --out replaces it\n";
+        std::fs::write(&marker, note).map_err(|e| Error::io(&marker, e))?;
+    }
+    Ok(())
+}
 
 /// Room kept for the frames file's OME-XML while frames arrive.
 const XML_RESERVE: usize = 16 << 10;
@@ -44,9 +81,10 @@ fn json_err(path: &Path, e: serde_json::Error) -> Error {
 }
 
 impl Recorder {
-    /// Create the folder and its files; write the plan and the experiment.
-    pub fn create(dir: &Path, plan: &Plan, exp: &Experiment) -> Result<Recorder> {
-        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    /// Create the folder (new or empty; a `simulated` run may replace a simulated recording)
+    /// and its files; write the plan and the experiment.
+    pub fn create(dir: &Path, plan: &Plan, exp: &Experiment, simulated: bool) -> Result<Recorder> {
+        empty_folder(dir, simulated)?;
         specmux_io::json::write_json(&dir.join("plan.json"), plan)?;
         specmux_io::json::write_json(&dir.join("experiment.json"), exp)?;
         let s = &plan.settings;
@@ -221,4 +259,34 @@ pub fn read_calibration(dir: &Path) -> Result<CalibrationFrames> {
         frames_averaged: averaged,
         source: "captures".into(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_a_simulated_recording_is_replaced_and_only_by_a_simulated_run() {
+        let scratch = tempfile::tempdir().unwrap();
+        let dir = scratch.path().join("rec");
+        empty_folder(&dir, true).unwrap();
+        std::fs::write(dir.join("frames.ome.tif"), "old").unwrap();
+        // A real run never replaces a recording, even a simulated one.
+        let e = empty_folder(&dir, false).unwrap_err().to_string();
+        assert!(e.contains("a real acquisition replaces none"), "{e}");
+        assert!(dir.join("frames.ome.tif").exists());
+        // A simulated run replaces a simulated recording whole.
+        empty_folder(&dir, true).unwrap();
+        assert!(!dir.join("frames.ome.tif").exists() && dir.join(SIMULATED).exists());
+        // A real recording (no marker) is replaced by no run.
+        let real = scratch.path().join("real");
+        empty_folder(&real, false).unwrap();
+        std::fs::write(real.join("frames.ome.tif"), "raw").unwrap();
+        let e = empty_folder(&real, true).unwrap_err().to_string();
+        assert!(
+            e.contains("not a simulated recording") && e.contains("frames.ome.tif"),
+            "{e}"
+        );
+        assert!(!real.join(SIMULATED).exists());
+    }
 }

@@ -179,7 +179,7 @@ fn the_recording_reads_back_and_an_interrupted_one_keeps_its_prefix() {
         }
     }
     let mut both = Both(
-        Recorder::create(&dir, &p, &exp).unwrap(),
+        Recorder::create(&dir, &p, &exp, true).unwrap(),
         Keep {
             stop_after: Some(3),
             ..Keep::default()

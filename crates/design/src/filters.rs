@@ -91,10 +91,11 @@ struct Report<'a> {
     seconds: Vec<(&'static str, f64)>,
 }
 
-/// The base experiment: a file, or the prototype.
+/// The base experiment: a file or a built-in scene's name (as every command takes them), or the
+/// prototype.
 pub fn base_experiment(path: Option<&Path>) -> Result<Experiment> {
     match path {
-        Some(p) => Experiment::load(p),
+        Some(p) => specmux_report::commands::experiment_for(&p.to_string_lossy(), None),
         None => Ok(Experiment::prototype()),
     }
 }

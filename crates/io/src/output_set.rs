@@ -2,7 +2,10 @@
 //! into a staging folder beside the target (`.NAME.staging-PID-N`); `commit` renames it into
 //! place, so a failed, killed or concurrent run never leaves a mixed or partial set under the
 //! final name. A run that fails drops its staging folder; one that was killed leaves it behind,
-//! and the next run into the same place removes it and says so.
+//! and the next run into the same place removes it and says so. A set carries a marker file
+//! ([`MARKER`]), and a folder is replaced only when it is new, empty or such a set, and holds
+//! none of the run's inputs ([`check_target`]): replacing a folder of raw frames or of other
+//! files would delete them.
 
 use specmux_core::{Error, Result};
 use std::path::{Path, PathBuf};
@@ -19,9 +22,61 @@ pub struct OutputSet {
 
 static SERIAL: AtomicU64 = AtomicU64::new(0);
 
+/// The file that marks a folder as an output set, which the next run into it may replace whole.
+pub const MARKER: &str = ".specmux-output";
+
+/// Refuse `target` as an output folder when replacing it would lose files: it holds one of the
+/// run's `inputs` ([`inputs_outside`]), or it exists and is a file, or a folder with files and
+/// no [`MARKER`] (not a set a run wrote).
+pub fn check_target(target: &Path, inputs: &[&Path]) -> Result<()> {
+    inputs_outside(target, inputs)?;
+    let refuse = |why: String| Err(Error::io(target, std::io::Error::other(why)));
+    if target.is_file() {
+        return refuse("is a file; --out names the folder the outputs are written to".into());
+    }
+    let Ok(entries) = std::fs::read_dir(target) else {
+        return Ok(());
+    };
+    let names: Vec<String> = entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    if names.is_empty() || names.iter().any(|n| n == MARKER) {
+        return Ok(());
+    }
+    let shown: Vec<&str> = names.iter().take(3).map(String::as_str).collect();
+    refuse(format!("the folder holds files a specmux run did not write ({}{}), which writing the outputs (the folder is replaced whole) would delete: pass a new or empty folder", shown.join(", "), if names.len() > 3 { ", …" } else { "" }))
+}
+
+/// Refuse an output folder `target` that holds one of the run's `inputs` (which need not exist:
+/// a built-in scene's name is no path): writing the outputs replaces the folder.
+pub fn inputs_outside(target: &Path, inputs: &[&Path]) -> Result<()> {
+    // A folder that is not there holds nothing; an input that is not there is no file.
+    let Ok(t) = target.canonicalize() else {
+        return Ok(());
+    };
+    for input in inputs {
+        let Ok(p) = input.canonicalize() else {
+            continue;
+        };
+        if p.starts_with(&t) {
+            let what = match p == t {
+                true => "is this run's input".to_string(),
+                false => format!("holds {}, an input of this run,", input.display()),
+            };
+            let why = format!("the output folder {what} which writing the outputs (the folder is replaced whole) would delete: pass another --out");
+            return Err(Error::io(target, std::io::Error::other(why)));
+        }
+    }
+    Ok(())
+}
+
 impl OutputSet {
-    /// Stage a new set for `target` (created on commit), removing stale staging folders.
+    /// Stage a new set for `target` (created on commit), removing stale staging folders; refused
+    /// where replacing `target` would lose files ([`check_target`], without inputs: a command
+    /// checks its inputs before its work).
     pub fn begin(target: &Path) -> Result<OutputSet> {
+        check_target(target, &[])?;
         let (parent, name) = split(target)?;
         std::fs::create_dir_all(&parent).map_err(|e| Error::io(&parent, e))?;
         let notes = remove_stale(&parent, &name)?;
@@ -34,6 +89,10 @@ impl OutputSet {
             );
             Error::io(target, std::io::Error::new(e.kind(), why))
         })?;
+        let marker = staging.join(MARKER);
+        let note =
+            "an output set of specmux: the next run with this --out replaces the folder whole\n";
+        std::fs::write(&marker, note).map_err(|e| Error::io(&marker, e))?;
         Ok(OutputSet {
             target: target.to_path_buf(),
             staging,
@@ -188,6 +247,49 @@ mod tests {
             set.notes
         );
         assert!(!d.join(".out.staging-0-0").exists());
+    }
+
+    #[test]
+    fn a_folder_of_other_files_or_of_the_runs_inputs_is_not_replaced() {
+        let scratch = temp("guard");
+        let d = scratch.path();
+        // Files no run wrote: refused, named, and left as they were.
+        let other = d.join("lab");
+        std::fs::create_dir(&other).unwrap();
+        std::fs::write(other.join("important.txt"), "keep").unwrap();
+        let e = OutputSet::begin(&other).err().unwrap().to_string();
+        assert!(
+            e.contains("important.txt") && e.contains("did not write"),
+            "{e}"
+        );
+        assert!(other.join("important.txt").exists());
+        // A set a run wrote carries the marker and is replaced; an empty folder is taken.
+        let target = d.join("out");
+        OutputSet::begin(&target).unwrap().commit().unwrap();
+        assert!(target.join(MARKER).exists());
+        OutputSet::begin(&target).unwrap().commit().unwrap();
+        std::fs::create_dir(d.join("empty")).unwrap();
+        OutputSet::begin(&d.join("empty"))
+            .unwrap()
+            .commit()
+            .unwrap();
+        // An input inside the folder (even a set's): refused; a name that is no path is not one.
+        let frame = target.join("frame.exr");
+        std::fs::write(&frame, "x").unwrap();
+        let e = check_target(&target, &[Path::new("dead-leaves"), &frame])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(
+            e.contains("frame.exr") && e.contains("an input of this run"),
+            "{e}"
+        );
+        assert!(check_target(&target, &[Path::new("dead-leaves")]).is_ok());
+        assert!(check_target(&frame, &[])
+            .err()
+            .unwrap()
+            .to_string()
+            .contains("is a file"));
     }
 
     /// A place where no folder can be made (/proc takes none): the error names the output
