@@ -108,6 +108,10 @@ def test_a_reconstructor_built_once_gives_what_reconstruct_gives(exp, sim, cube)
     strided = np.zeros((fourier.shape[0], SIZE, 2 * SIZE), np.float32)[:, :, ::2]
     with pytest.raises(specmux.SpecmuxError, match="C-contiguous"):
         recon.realtime(sim["frame"], out=strided)
+    with pytest.raises(specmux.SpecmuxError, match="float32 array .* this one is float64"):
+        recon.realtime(sim["frame"], out=np.zeros(fourier.shape, np.float64))
+    with pytest.raises(specmux.SpecmuxError, match="this one is a list"):
+        recon.realtime(sim["frame"], out=[])
     with pytest.raises(specmux.SpecmuxError, match="rig.sensor"):
         recon(sim["frame"].astype(np.uint16))
     bad = sim["frame"].copy()

@@ -469,7 +469,7 @@ fn host_checks(p: &Plan) -> Vec<Check> {
             s.frames,
             tiff <= TIFF_LIMIT_BYTES,
             format!(
-                "{:.1} MB of frames exceed the 4 GiB of one classic TIFF",
+                "{:.1} MB of frames; one classic TIFF holds at most 4 GiB",
                 mb(tiff)
             ),
         ),

@@ -63,6 +63,9 @@ pub fn grey16_from_bytes(bytes: &[u8], path: &Path) -> Result<Cube> {
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(4 * exr::MAX_SAMPLES as u64);
     reader.limits(limits);
+    if reader.format() == Some(image::ImageFormat::Tiff) && more_pages(bytes) {
+        return Err(bad("a TIFF of several pages (a recording's frames.ome.tif?) is no single frame: pass one frame, or the recording's folder to `specmux reconstruct RECORDING_DIR`".into()));
+    }
     let img = reader.decode().map_err(|e| bad(e.to_string()))?;
     let image::DynamicImage::ImageLuma16(g) = img else {
         return Err(bad(format!(
@@ -72,6 +75,12 @@ pub fn grey16_from_bytes(bytes: &[u8], path: &Path) -> Result<Cube> {
     };
     let (w, h) = (g.width() as usize, g.height() as usize);
     Cube::from_vec(w, h, 1, g.into_raw().into_iter().map(f32::from).collect())
+}
+
+/// Whether a TIFF holds a page after its first (a stack, whose other pages a frame reader would
+/// silently leave out); a TIFF the decoder cannot open is left to the image reader's error.
+fn more_pages(bytes: &[u8]) -> bool {
+    tiff::decoder::Decoder::new(std::io::Cursor::new(bytes)).is_ok_and(|d| d.more_images())
 }
 
 /// The frame `stem` in `dir` (`.exr`, else `.png`, `.tif`, `.tiff`), None when none exists.
@@ -92,6 +101,14 @@ pub fn read_calibration(
     width: usize,
     height: usize,
 ) -> Result<CalibrationFrames> {
+    if !dir.is_dir() {
+        let what = match dir.exists() {
+            true => "is a file",
+            false => "no such folder",
+        };
+        let why = format!("{what}: calibration frames are a folder of dark.exr, flat.exr and pattern-1.exr … pattern-N.exr (as `specmux simulate` writes it); a recording's calibration.ome.tif is read by `specmux reconstruct RECORDING_DIR`");
+        return Err(Error::io(dir, std::io::Error::other(why)));
+    }
     let missing = |stem: &str| {
         Error::io(
         dir.join(format!("{stem}.exr")),
@@ -162,7 +179,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_16_bit_tiff_reads_as_the_same_dn_as_the_png_and_8_bits_are_refused() {
+    fn a_16_bit_tiff_reads_as_the_same_dn_as_the_png_and_8_bits_or_a_stack_are_refused() {
         let scratch = tempfile::Builder::new()
             .prefix("specmux-frame-tif-")
             .tempdir()
@@ -182,5 +199,39 @@ mod tests {
         grey8.save(dir.join("g.tif")).unwrap();
         let e = read(&dir.join("g.tif")).unwrap_err().to_string();
         assert!(e.contains("g.tif") && e.contains("preview"), "{e}");
+        // A stack of two 16-bit pages is no frame: refused, not read as its first page.
+        let stack = dir.join("frames.ome.tif");
+        let mut enc =
+            tiff::encoder::TiffEncoder::new(std::fs::File::create(&stack).unwrap()).unwrap();
+        for page in 0..2u16 {
+            let data = vec![page; 4 * 4];
+            enc.write_image::<tiff::encoder::colortype::Gray16>(4, 4, &data)
+                .unwrap();
+        }
+        drop(enc);
+        let e = read(&stack).unwrap_err().to_string();
+        assert!(
+            e.contains("frames.ome.tif") && e.contains("several pages"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn calibration_frames_are_a_folder_and_a_file_or_missing_path_says_so() {
+        let scratch = tempfile::Builder::new()
+            .prefix("specmux-frame-cal-")
+            .tempdir()
+            .unwrap();
+        let file = scratch.path().join("calibration.ome.tif");
+        std::fs::write(&file, "x").unwrap();
+        let e = read_calibration(&file, 6, 5, 3).unwrap_err().to_string();
+        assert!(
+            e.contains("calibration.ome.tif: is a file") && e.contains("RECORDING_DIR"),
+            "{e}"
+        );
+        let e = read_calibration(&scratch.path().join("none"), 6, 5, 3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("none: no such folder"), "{e}");
     }
 }

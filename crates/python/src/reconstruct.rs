@@ -213,20 +213,33 @@ impl PyReconstructor {
         &mut self,
         py: Python<'py>,
         frame: &Bound<'py, PyAny>,
-        out: Option<Bound<'py, PyArray3<f32>>>,
+        out: Option<Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray3<f32>>> {
         let frame = self.frame(frame)?;
         let (h, w) = self.shape();
         let shape = [self.recon.unmixer.bands(), h, w];
-        let out = match out {
-            Some(a) if a.shape() != shape => {
+        let out = match out.map(|a| a.cast_into::<PyArray3<f32>>()).transpose() {
+            Err(e) => {
+                let a = e.into_inner();
+                let array = a
+                    .getattr("dtype")
+                    .and_then(|d| Ok((d.str()?, a.getattr("ndim")?)));
+                let kind = match array {
+                    Ok((dtype, ndim)) => format!("{dtype} with {ndim} dimensions"),
+                    Err(_) => format!("a {}", a.get_type().name()?),
+                };
+                return Err(err(format!(
+                    "realtime: out must be a C-contiguous float32 array of shape {shape:?} (bands, height, width); this one is {kind}"
+                )));
+            }
+            Ok(Some(a)) if a.shape() != shape => {
                 return Err(err(format!(
                     "realtime: out is {:?}, the cube is {shape:?} (bands, height, width)",
                     a.shape()
                 )))
             }
-            Some(a) => a,
-            None => PyArray3::zeros(py, shape, false),
+            Ok(Some(a)) => a,
+            Ok(None) => PyArray3::zeros(py, shape, false),
         };
         let mut view = out.try_readwrite().map_err(err)?;
         let dst = view

@@ -605,8 +605,10 @@ pub fn simulate(
     let cache = PatternCache::from_env()?;
     let pipeline = specmux_twin::forward::Pipeline::build(&exp, &rig, &materials)?
         .with_pattern_cache(cache.clone());
-    say!(text, "{}", pipeline.explain());
-    for w in &rig.warnings {
+    let stages = pipeline.explain();
+    say!(text, "{stages}");
+    // A stage's own warning is in its line already.
+    for w in rig.warnings.iter().filter(|w| !stages.contains(w.as_str())) {
         say!(text, "warning: {w}");
     }
     if explain {

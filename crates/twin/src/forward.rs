@@ -203,6 +203,7 @@ impl Pipeline {
             multiplex: MultiplexStage {
                 device: for_device(&device, (rig.width, rig.height, rig.imaged_carriers.len()))
                     .map_err(|e| on_device(exp, e))?,
+                timed: exp.rig.timing.is_some(),
             },
             sensor: match &exp.rig.sensor {
                 Some(c) => Some(SensorStage {
@@ -697,6 +698,8 @@ impl Step<Channels, Exposed> for TimingStage {
 /// `[compute] device` names.
 struct MultiplexStage {
     device: Box<dyn Multiplexer>,
+    /// Whether z is the timing stage's exposed channels (else the wheel's x).
+    timed: bool,
 }
 
 impl Stage for MultiplexStage {
@@ -704,10 +707,12 @@ impl Stage for MultiplexStage {
         "multiplex"
     }
     fn describe(&self) -> String {
-        format!(
-            "y = Σ_k z_k ⊙ s̃_k (z = x without timing; noiseless, unquantised), on the {}",
-            self.device.device().to_uppercase()
-        )
+        let z = match self.timed {
+            true => "z the exposed channels",
+            false => "z = x, no [rig.timing]",
+        };
+        let device = self.device.device().to_uppercase();
+        format!("y = Σ_k z_k ⊙ s̃_k ({z}), noiseless and unquantised, on the {device}")
     }
 }
 
