@@ -43,12 +43,8 @@ fn main() -> ExitCode {
         std::env::set_var(specmux_twin::pattern_cache::ENV, dir);
     }
     install_interrupt_handler();
-    let lib = cli
-        .spectra
-        .clone()
-        .map(Library::new)
-        .unwrap_or_else(Library::default_root);
-    match dispatch(cli.command, &lib) {
+    let done = library(cli.spectra.clone()).and_then(|lib| dispatch(cli.command, &lib));
+    match done {
         Ok(text) => {
             emit(&text);
             ExitCode::SUCCESS
@@ -61,6 +57,26 @@ fn main() -> ExitCode {
                 ExitCode::FAILURE
             }
         }
+    }
+}
+
+/// The spectral library `--spectra`, else `$SPECMUX_SPECTRA`, names (a folder that is there),
+/// else the embedded one.
+fn library(spectra: Option<PathBuf>) -> std::result::Result<Library, String> {
+    let from = if spectra.is_some() {
+        "--spectra"
+    } else {
+        "$SPECMUX_SPECTRA"
+    };
+    let lib = spectra
+        .map(Library::new)
+        .unwrap_or_else(Library::default_root);
+    match lib.root().filter(|dir| !dir.is_dir()) {
+        Some(dir) => Err(format!(
+            "{from} = {}: no such folder (it names a spectral library: a copy of spectra/)",
+            dir.display()
+        )),
+        None => Ok(lib),
     }
 }
 

@@ -430,3 +430,20 @@ fn an_output_folder_of_other_files_or_of_the_inputs_is_refused_before_any_work()
     let (ok, err) = specmux(&["rehearse", "dead-leaves", "--frames", "2", "--dry-run"]);
     assert!(ok, "{err}");
 }
+
+#[test]
+fn a_missing_scene_file_or_spectral_library_is_named_by_its_key() {
+    let scratch = tmpdir("bad-missing-source");
+    let d = scratch.path();
+    for (source, shown) in [
+        ("exr:nope.exr", "nope.exr is not there"),
+        ("mitsuba:renders/x", "renders/x_truth.exr is not there"),
+    ] {
+        let toml = format!("[scene]\nsource = \"{source}\"\nquantity = \"radiance\"\n");
+        let (ok, err) = simulate(d, &toml, None);
+        assert_one_line_error(ok, &err, &["exp.toml", "scene.source", source, shown]);
+    }
+    let none = d.join("no-library");
+    let (ok, err) = simulate(d, SMALL, Some(&none));
+    assert_one_line_error(ok, &err, &["--spectra", "no-library", "no such folder"]);
+}

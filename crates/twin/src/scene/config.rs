@@ -152,6 +152,23 @@ impl SceneConfig {
     }
 }
 
+/// The file `path` that `cfg`'s source reads (an `exr:` cube, a Mitsuba render) is there; else
+/// the error names the experiment file, `scene.source` and where the path led.
+pub fn source_file_there(cfg: &SceneConfig, file: &str, path: &Path) -> Result<()> {
+    match path.is_file() {
+        true => Ok(()),
+        false => Err(Error::config(
+            file,
+            "scene.source",
+            format!("\"{}\"", cfg.source),
+            &format!(
+                "{} is not there (a path is relative to the experiment file)",
+                path.display()
+            ),
+        )),
+    }
+}
+
 /// An `exr:` scene's size and band grid as the file gives them: `scene.size` and
 /// `scene.wavelengths_nm` taken from the file when the experiment leaves them out (`wrote`),
 /// checked against it when it writes them. `scene.quantity` must be written.
@@ -161,6 +178,7 @@ pub fn exr_geometry(
     wrote: impl Fn(&str) -> bool,
 ) -> Result<SceneConfig> {
     let path = cfg.path(cfg.source.trim_start_matches("exr:"), file);
+    source_file_there(cfg, file, &path)?;
     if !wrote("scene.quantity") {
         let why = format!(
             "required for an external cube: say whether {} holds \"reflectance\" (lit by scene.illuminant) or \"radiance\"",

@@ -66,7 +66,21 @@ pub fn validate(cfg: &SceneConfig, f: &str) -> Result<()> {
         ));
     }
     mitsuba::check(cfg, f)?;
+    check_source_file(cfg, f)?;
     cfg.validate(f)
+}
+
+/// The file an `exr:` or `mitsuba:` source reads is there (a path relative to the experiment
+/// file `f`), so a missing one is named by its key before any work.
+fn check_source_file(cfg: &SceneConfig, f: &str) -> Result<()> {
+    let path = if let Some(rel) = cfg.source.strip_prefix("exr:") {
+        cfg.path(rel, f)
+    } else if let Some(rel) = cfg.source.strip_prefix(mitsuba::PREFIX) {
+        mitsuba::truth_path(&cfg.path(rel, f))
+    } else {
+        return Ok(());
+    };
+    config::source_file_there(cfg, f, &path)
 }
 
 /// Build the experiment's scene: a procedural one from held-out materials, or an EXR cube.
