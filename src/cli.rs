@@ -111,6 +111,7 @@ pub enum Command {
     /// sinusoid, its carrier gain, the 2ω and cross-window energies, the pinhole throughput,
     /// and PNGs of the binary and imaged patterns and their spectra.
     Patterns {
+        /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
         experiment: String,
         #[arg(long, default_value = "out/patterns")]
         out: PathBuf,
@@ -124,6 +125,7 @@ pub enum Command {
     /// Timing report: the weight matrix w_ik of one exposure, the operator's warnings and a
     /// timeline PNG (wheel segment, pattern shown, exposure window).
     Timing {
+        /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
         experiment: String,
         #[arg(long, default_value = "out/timing")]
         out: PathBuf,
@@ -152,6 +154,7 @@ pub enum Command {
     /// of the experiment that recorded it, or every frame of a recording folder
     /// (`acquire`/`rehearse`) with the calibration acquired in it.
     Reconstruct {
+        /// The frame (one-channel EXR, or 16-bit PNG or TIFF), or a recording's folder.
         frame: PathBuf,
         /// The experiment file (or built-in scene name) whose rig recorded the frame: required.
         #[arg(long)]
@@ -176,7 +179,9 @@ pub enum Command {
     Acquire {
         #[command(flatten)]
         run: controller::RunArgs,
-        #[arg(long, default_value = "sim")]
+        /// The devices: `sim` (the twin's, on a virtual clock) or `real` (--camera, --wheel-port,
+        /// --alp-lib).
+        #[arg(long, default_value = "sim", value_parser = ["sim", "real"])]
         backend: String,
         #[command(flatten)]
         real: specmux_controller::real::RealRigArgs,

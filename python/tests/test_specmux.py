@@ -171,3 +171,19 @@ def test_to_dict_reads_back_to_the_same_experiment():
     for e in (specmux.Experiment.prototype(size=32), specmux.Experiment.from_dict({"rig": {"sensor": {}}})):
         again = specmux.Experiment.from_dict(e.to_dict())
         assert again.to_dict() == e.to_dict()
+        # ... and as a file's text, which from_toml (and the CLI) read back.
+        assert specmux.Experiment.from_toml(e.to_toml(), "saved.toml").to_dict() == e.to_dict()
+
+
+def test_size_takes_a_pair_or_one_int_for_a_square():
+    e = specmux.Experiment.prototype(size=32)
+    e.size = 48
+    assert e.size == (48, 48)
+    e.size = (64, 32)
+    assert e.size == (64, 32)
+    for bad in ("big", (1, 2, 3), -4):
+        with pytest.raises(specmux.SpecmuxError, match="one int for a square"):
+            e.size = bad
+    with pytest.raises(specmux.SpecmuxError, match=r"scene.size\[0\]"):
+        e.size = 0
+    assert e.size == (64, 32)

@@ -309,10 +309,11 @@ fn outcome_text(o: &Outcome, virtual_s: Option<f64>, wall_s: f64) -> String {
     let flagged = o.frames.iter().filter(|r| !r.ok()).count();
     say!(
         t,
-        "acquired {} frames ({flagged} marked), calibration from {} exposures; {} incidents",
+        "acquired {} frames ({flagged} marked), calibration from {} exposures; {} incident{}",
         o.frames.len(),
         o.calibration.len(),
-        o.incidents.len()
+        o.incidents.len(),
+        if o.incidents.len() == 1 { "" } else { "s" }
     );
     for i in &o.incidents {
         say!(t, "  {}: {}", i.kind, i.message);
@@ -437,7 +438,9 @@ fn acquire_in(
 /// The plan of `rehearse` and `acquire`.
 #[derive(clap::Args)]
 pub struct RunArgs {
+    /// A built-in scene (dead-leaves, shaded-objects, bars) or an experiment file.
     pub experiment: PathBuf,
+    /// Frames to acquire after the calibration captures.
     #[arg(long, default_value_t = 100)]
     pub frames: usize,
     /// Print the plan, its checks and the expected timeline; send nothing.

@@ -45,6 +45,7 @@ pub struct CarrierArgs {
     /// Experiment files whose scenes the layout is designed on; default: every file in `--scenes-dir`.
     #[arg(long)]
     pub scenes: Vec<PathBuf>,
+    /// The folder of experiment files `--scenes` defaults to.
     #[arg(long, default_value = "scenes")]
     pub scenes_dir: PathBuf,
     /// The user's cubes (EXR, or experiment files): design on these alone (scene-adaptive).
@@ -68,6 +69,7 @@ pub struct CarrierArgs {
     /// Experiment giving the wheel, light, camera and reconstruction (default: the prototype).
     #[arg(long)]
     pub experiment: Option<PathBuf>,
+    /// Seed of the search's random restarts (the same seed, the same layouts).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     #[arg(long, default_value = "out/design-carriers")]

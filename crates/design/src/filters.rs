@@ -49,6 +49,7 @@ pub struct FilterArgs {
     /// Experiment files whose scenes score the sets; default: every file in `--scenes-dir`.
     #[arg(long)]
     pub scenes: Vec<PathBuf>,
+    /// The folder of experiment files `--scenes` defaults to.
     #[arg(long, default_value = "scenes")]
     pub scenes_dir: PathBuf,
     /// Side of procedural scenes in the simulations.

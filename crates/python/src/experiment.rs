@@ -63,16 +63,23 @@ impl PyExperiment {
         Ok(PyExperiment { inner: e })
     }
 
-    /// The scene size (width, height) in pixels; settable (validated).
+    /// The scene size (width, height) in pixels; settable (validated) to a pair or, for a
+    /// square, one int.
     #[getter]
     fn size(&self) -> (usize, usize) {
         (self.inner.scene.size[0], self.inner.scene.size[1])
     }
 
     #[setter]
-    fn set_size(&mut self, size: (usize, usize)) -> PyResult<()> {
+    fn set_size(&mut self, size: &Bound<'_, PyAny>) -> PyResult<()> {
+        let (w, h) = match size.extract::<usize>() {
+            Ok(n) => (n, n),
+            Err(_) => size.extract::<(usize, usize)>().map_err(|_| {
+                err(format!("size = {size}: a (width, height) pair of pixel counts, or one int for a square"))
+            })?,
+        };
         let mut e = self.inner.clone();
-        e.scene.size = [size.0, size.1];
+        e.scene.size = [w, h];
         e.validate().map_err(err)?;
         self.inner = e;
         Ok(())
@@ -92,10 +99,16 @@ impl PyExperiment {
 
     /// The whole experiment as a dict (every key, defaults filled in) that `from_dict` reads
     /// back to the same experiment: sections it lacks are absent, and with `method = "auto"`
-    /// the iteration counts auto chooses are left out unless they were written (`to_table`).
+    /// the iteration counts auto chooses are left out unless they were written.
     fn to_dict(&self, py: Python<'_>) -> PyResult<Py<PyAny>> {
         let text = serde_json::to_string(&self.inner.to_table().map_err(err)?).map_err(err)?;
         Ok(py.import("json")?.call_method1("loads", (text,))?.unbind())
+    }
+
+    /// The same as `to_dict`, as the text of an experiment file, which `from_toml` and the
+    /// command line (`specmux demo FILE.toml`) read back to the same experiment.
+    fn to_toml(&self) -> PyResult<String> {
+        toml::to_string(&self.inner.to_table().map_err(err)?).map_err(err)
     }
 
     fn __repr__(&self) -> String {

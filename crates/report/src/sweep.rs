@@ -54,6 +54,9 @@ fn literal(v: &str) -> std::result::Result<toml::Value, String> {
         None if v.chars().all(|c| c.is_alphanumeric() || "-_/".contains(c)) => {
             Ok(toml::Value::String(v.to_string()))
         }
+        None if v.contains(',') && !v.starts_with('[') => Err(format!(
+            "`{v}` is not a TOML value (values are separated by `;`, e.g. KEY=0.2;0.25)"
+        )),
         None => Err(format!("`{v}` is not a TOML value")),
     }
 }
@@ -243,6 +246,9 @@ mod tests {
         assert!(Vary::parse("nokey").is_err());
         assert!(Vary::parse("a..b=1").is_err());
         assert!(Vary::parse("a=1;{").is_err());
+        // A comma list is not one value: the separator is named.
+        let e = Vary::parse("reconstruct.crop=0.2,0.25").err().unwrap();
+        assert!(e.to_string().contains("separated by `;`"), "{e}");
     }
 
     #[test]
