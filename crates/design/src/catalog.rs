@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use specmux_core::spectral::{Curve, Library};
 use specmux_core::{Error, Result};
 use specmux_io::toml_file::read_toml;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Provenance prefix of the curves this module writes; such files are not read back as
 /// catalogue entries (they are regenerated from their family).
@@ -227,8 +227,14 @@ fn library_name(cat: &Library, lib: &Library, rel: &str) -> Result<String> {
 /// Write each generated candidate of `chosen` as `<library>/<name>.csv` (the spectral CSV
 /// format of spectra/README.md), so the experiment can name it; measured ones, and generated
 /// ones the library already holds to the byte (as the embedded one holds spectra/design/), are
-/// left alone.
-pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathBuf>> {
+/// left alone. The embedded library is read-only: there the curve goes to
+/// `<out>/filters/<name>.csv`, which experiments name by its absolute path (without `.csv`, as a
+/// curve outside the library is named). Returns each written curve's (name, name to use).
+pub fn write_generated(
+    chosen: &[&Candidate],
+    lib: &Library,
+    out: &Path,
+) -> Result<Vec<(String, String)>> {
     let mut written = Vec::new();
     for c in chosen {
         let Some(prov) = &c.generated else { continue };
@@ -241,13 +247,18 @@ pub fn write_generated(chosen: &[&Candidate], lib: &Library) -> Result<Vec<PathB
         if lib.holds(&c.name, &text) {
             continue;
         }
-        if lib.root().is_none() {
-            let why = "the embedded spectral library is read-only: pass --spectra DIR (a copy of spectra/) to keep generated filters";
-            return Err(Error::config("--spectra", "spectra", lib.provenance(), why));
-        }
-        let path = lib.path(&c.name);
-        specmux_io::atomic::write_bytes(&path, text.as_bytes())?;
-        written.push(path);
+        let name = match lib.root() {
+            Some(_) => c.name.clone(),
+            None => {
+                let dir = std::path::absolute(out).map_err(|e| Error::io(out, e))?;
+                dir.join("filters")
+                    .join(&c.name)
+                    .to_string_lossy()
+                    .into_owned()
+            }
+        };
+        specmux_io::atomic::write_bytes(&lib.path(&name), text.as_bytes())?;
+        written.push((c.name.clone(), name));
     }
     Ok(written)
 }
@@ -290,7 +301,7 @@ mod tests {
             .tempdir()
             .unwrap();
         let tmp = Library::new(scratch.path());
-        write_generated(&[&g[3]], &tmp).unwrap();
+        write_generated(&[&g[3]], &tmp, scratch.path()).unwrap();
         let back = tmp.curve(&g[3].name).unwrap();
         assert!((back.eval(537.0) - g[3].curve.eval(537.0)).abs() < 1e-6);
         assert!(measured(&tmp, &tmp).unwrap().is_empty());
@@ -314,22 +325,32 @@ mod tests {
     }
 
     /// The embedded library holds the curves spectra/design/ keeps, so choosing one of them
-    /// writes nothing; a generated curve it does not hold is refused, naming `--spectra`.
+    /// writes nothing; a generated curve it does not hold goes into the output folder, named by
+    /// its absolute path, under which the embedded library reads it back.
     #[test]
     fn the_embedded_library_needs_no_write_of_a_curve_it_holds() {
         let g = Families::default().generate("t").unwrap();
         let held = g.iter().find(|c| c.name == "design/gauss-420-60").unwrap();
         let embedded = Library::embedded();
-        assert!(write_generated(&[held], &embedded).unwrap().is_empty());
+        let scratch = tempfile::tempdir().unwrap();
+        let out = scratch.path();
+        assert!(write_generated(&[held], &embedded, out).unwrap().is_empty());
         let odd = Families {
             gaussian_fwhm_nm: vec![77.0],
             ..Default::default()
         };
         let new = odd.generate("t").unwrap();
-        let e = write_generated(&[&new[0]], &embedded)
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("--spectra") && e.contains("read-only"), "{e}");
+        let written = write_generated(&[&new[0]], &embedded, out).unwrap();
+        let [(name, used)] = &written[..] else {
+            panic!("{written:?}")
+        };
+        assert_eq!(name, &new[0].name);
+        assert!(
+            Path::new(used).is_absolute() && used.ends_with(&new[0].name),
+            "{used}"
+        );
+        let back = embedded.curve(used).unwrap();
+        assert!((back.eval(537.0) - new[0].curve.eval(537.0)).abs() < 1e-6);
     }
 
     #[test]

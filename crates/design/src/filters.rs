@@ -188,6 +188,8 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     let t0 = Instant::now();
     let base = base_experiment(a.experiment.as_deref())?;
     let s = setup(a, &base, lib)?;
+    // The scenes before the search: a bad --scenes is refused before its seconds of work.
+    let scenes = scenes::load(&scenes::files(&a.scenes, &a.scenes_dir)?, Some(a.size))?;
     let t_setup = t0.elapsed().as_secs_f64();
     let t = Instant::now();
     let paper = search::minimax_correlation(&s.ev, a.choose, &s.keep, a.top);
@@ -218,7 +220,7 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     let _ = writeln!(text, "exact search: branch and bound on the paper's criterion {t_bnb:.3} s; every combination scored on all criteria {t_all:.2} s (2 cores)\n");
     text += &rank_table(&s, &paper.items, &ranked);
     let t = Instant::now();
-    let sims = simulate_sets(a, &base, &s, &paper.items, &ranked[4].items, lib)?;
+    let sims = simulate_sets(a, &base, &scenes, &s, (&paper.items, &ranked[4].items), lib)?;
     let t_sim = t.elapsed().as_secs_f64();
     let chosen = choose(&sims);
     text += &sim_table(&sims, chosen);
@@ -284,17 +286,16 @@ fn rank_table(s: &Setup, paper: &[Ranked], ranked: &[search::TopK]) -> String {
     t
 }
 
-/// Simulate the base wheel, the paper's best sets and the predicted-RMSE best sets on every scene.
+/// Simulate the base wheel, the paper's best sets and the predicted-RMSE best sets (`paper`, `ours`) on
+/// every scene of `sc`.
 fn simulate_sets(
     a: &FilterArgs,
     base: &Experiment,
+    sc: &[Experiment],
     s: &Setup,
-    paper: &[Ranked],
-    ours: &[Ranked],
+    (paper, ours): (&[Ranked], &[Ranked]),
     lib: &Library,
 ) -> Result<Vec<Simulated>> {
-    let files = scenes::files(&a.scenes, &a.scenes_dir)?;
-    let sc = scenes::load(&files, Some(a.size))?;
     let mut sets: Vec<(String, Vec<String>)> =
         vec![("base wheel".into(), base.rig.wheel.filters.clone())];
     let names = |set: &[usize]| {
@@ -312,17 +313,27 @@ fn simulate_sets(
         .iter()
         .filter(|c| sets.iter().any(|(_, f)| f.contains(&c.name)))
         .collect();
-    catalog::write_generated(&chosen, lib)?;
+    let renamed = catalog::write_generated(&chosen, lib, &a.out)?;
     let bar = progress::bar("simulating sets on scenes");
     bar.set_length((sets.len() * sc.len()) as u64);
     let mut out = Vec::new();
-    for (label, filters) in sets {
-        let idx: Option<Vec<usize>> = filters
+    for (label, names) in sets {
+        let idx: Option<Vec<usize>> = names
             .iter()
             .map(|f| s.cat.iter().position(|c| &c.name == f))
             .collect();
+        // A curve the embedded library could not take is named by its file in --out.
+        let filters: Vec<String> = (names.iter())
+            .map(|f| {
+                renamed
+                    .iter()
+                    .find(|(n, _)| n == f)
+                    .map_or(f, |(_, u)| u)
+                    .clone()
+            })
+            .collect();
         let mut outcomes = Vec::new();
-        for e in &sc {
+        for e in sc {
             let mut e = e.clone();
             e.rig.wheel.filters = filters.clone();
             outcomes.push(scenes::simulate(&e, lib)?);
