@@ -424,10 +424,14 @@ pub fn comparison_png(path: &Path, c: &Comparison) -> Result<()> {
     let (pw, ph) = panel_size((w, h), 0);
     let ch = ph + title_height(HEADING);
     let Some(truth) = c.truth else {
-        return render_png(path, (pw.max(640), ch), |root| {
+        // The heading needs 640 px; a narrower panel is centred under it.
+        let width = pw.max(640);
+        return render_png(path, (width, ch), |root| {
             let root = root.titled(&heading, ("sans-serif", 12)).map_err(show)?;
+            let (_, rest) = root.split_horizontally((width - pw) / 2);
+            let (area, _) = rest.split_horizontally(pw);
             let t = "reconstruction (no truth given: no error map)";
-            draw_image(&root, t, &resampled(est_rgb), &axes, &marks).map(|_| ())
+            draw_image(&area, t, &resampled(est_rgb), &axes, &marks).map(|_| ())
         });
     };
     let (truth, truth_rgb) = truth;

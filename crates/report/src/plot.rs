@@ -409,12 +409,15 @@ pub fn keyed_line_plot(
 
 /// `count` pixels of `truth` (or of a reconstruction where there is none) with distinct
 /// spectra: the brightest, then each farthest in spectral angle from those already chosen
-/// (searched on a coarse grid).
+/// (searched on a coarse grid that keeps a twenty-fourth of the side from the edges, so a
+/// pixel's mark on the comparison panel is not cut by the frame's border).
 pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
-    let step = (truth.width.min(truth.height) / 48).max(1);
-    let cands: Vec<(usize, usize, Vec<f32>)> = (step / 2..truth.height)
+    let side = truth.width.min(truth.height);
+    let (step, margin) = ((side / 48).max(1), side / 24);
+    let (w, h) = (truth.width - margin, truth.height - margin);
+    let cands: Vec<(usize, usize, Vec<f32>)> = (margin.max(step / 2)..h)
         .step_by(step)
-        .flat_map(|y| (step / 2..truth.width).step_by(step).map(move |x| (x, y)))
+        .flat_map(|y| (margin.max(step / 2)..w).step_by(step).map(move |x| (x, y)))
         .map(|(x, y)| (x, y, truth.spectrum(x, y)))
         .collect();
     let norm = |v: &[f32]| v.iter().map(|a| (*a as f64).powi(2)).sum::<f64>().sqrt();

@@ -490,12 +490,12 @@ impl RunReport {
     /// The result table as fixed-width text.
     pub fn table(&self) -> String {
         let mut s = format!(
-            "{:<18} {:<34} {:>9} {:>7} {:>8} {:>8} {:>10}\n",
+            "{:<20} {:<34} {:>9} {:>7} {:>8} {:>8} {:>10}\n",
             "stage", "against", "PSNR dB", "SSIM", "NRMSE", "SAM °", "seconds"
         );
         for r in &self.results {
             s += &format!(
-                "{:<18} {:<34} {:>9.2} {:>7.4} {:>8.4} {:>9} {:>10.4}\n",
+                "{:<20} {:<34} {:>9.2} {:>7.4} {:>8.4} {:>9} {:>10.4}\n",
                 r.stage,
                 r.against,
                 r.psnr_db,
