@@ -83,7 +83,7 @@ fn library(spectra: Option<PathBuf>) -> std::result::Result<Library, String> {
 /// Refuse, before any work, an `--out` whose replacement would lose files: one holding the
 /// command's inputs, or (for the commands that replace their folder whole) files no run wrote.
 fn check_out(cmd: &Command) -> Result<()> {
-    use specmux_io::output_set::{check_target, inputs_outside};
+    use specmux_io::output_set::check_target;
     let p = |s: &String| PathBuf::from(s);
     let (out, inputs): (&Path, Vec<PathBuf>) = match cmd {
         Command::Demo { scene, out, .. } => (out, vec![p(scene)]),
@@ -124,16 +124,9 @@ fn check_out(cmd: &Command) -> Result<()> {
             );
             (out, inputs)
         }
-        // A recording folder is checked by the recorder (new or empty, or a simulated one).
-        Command::Rehearse(a) | Command::Acquire { run: a, .. } => {
-            let default = match cmd {
-                Command::Rehearse(_) => "out/rehearse",
-                _ => "out/acquire",
-            };
-            let out = a.out.clone().unwrap_or_else(|| default.into());
-            return inputs_outside(&out, &[&a.experiment]);
-        }
-        Command::Design { .. } => return Ok(()),
+        // A recording's folder is checked by the controller (its experiment outside, the folder
+        // new or empty, or a simulated recording); design writes its files one by one.
+        Command::Rehearse(_) | Command::Acquire { .. } | Command::Design { .. } => return Ok(()),
     };
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     check_target(out, &inputs)

@@ -389,7 +389,11 @@ fn an_output_folder_of_other_files_or_of_the_inputs_is_refused_before_any_work()
     std::fs::create_dir(&lab).unwrap();
     std::fs::write(lab.join("important.txt"), "keep").unwrap();
     let (ok, err) = specmux(&["demo", "--size", "32", "--out", &s(&lab)]);
-    assert_one_line_error(ok, &err, &["lab", "important.txt", "did not write"]);
+    assert_one_line_error(
+        ok,
+        &err,
+        &["lab", "important.txt", "no output of a specmux run"],
+    );
     assert!(lab.join("important.txt").exists());
     // A run's own folder is replaced by the next run; its frame cannot be reconstructed into it.
     let sim = d.join("sim");

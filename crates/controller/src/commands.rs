@@ -189,7 +189,7 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 }
 
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
-    let exp = experiment_of(o)?;
+    let exp = experiment_of(o, out)?;
     let faults = faults(&o.faults, o.frames)?;
     let (plan, text) = rehearsal_plan(&exp, o.frames, out);
     if o.dry_run {
@@ -206,8 +206,10 @@ fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     Ok(text)
 }
 
-/// The experiment of a run: a file or a built-in scene's name, as every command takes them.
-fn experiment_of(o: &RunOptions) -> Result<Experiment> {
+/// The experiment of a run: a file or a built-in scene's name, as every command takes them; a
+/// file inside the recording's folder `out` is refused (a simulated run replaces the folder).
+fn experiment_of(o: &RunOptions, out: &Path) -> Result<Experiment> {
+    specmux_io::output_set::inputs_outside(out, &[&o.experiment])?;
     Ok(specmux_report::commands::experiment_for(
         &o.experiment.to_string_lossy(),
         None,
@@ -382,7 +384,7 @@ fn acquire_in(
     out: &Path,
     lib: &Library,
 ) -> Result<String> {
-    let (exp, frames, dry) = (experiment_of(o)?, o.frames, o.dry_run);
+    let (exp, frames, dry) = (experiment_of(o, out)?, o.frames, o.dry_run);
     let faults = faults(&o.faults, o.frames)?;
     // The real rig is opened (inquiries only) even for a dry run: the plan needs its limits.
     let (real_devices, limits) = match backend {

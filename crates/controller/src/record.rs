@@ -23,6 +23,7 @@ use crate::plan::Plan;
 use crate::run::{FrameRecord, Outcome, Sink};
 use specmux_core::calibration::CalibrationFrames;
 use specmux_core::Cube;
+use specmux_io::output_set;
 use specmux_twin::Experiment;
 use std::fs::File;
 use std::io::Write;
@@ -34,22 +35,16 @@ pub const SIMULATED: &str = ".specmux-simulated-recording";
 /// Make `dir` the empty folder of a new recording: refused where it holds files, unless they are
 /// a simulated recording and this one is simulated too (then they are removed first).
 fn empty_folder(dir: &Path, simulated: bool) -> Result<()> {
-    let names: Vec<String> = match std::fs::read_dir(dir) {
-        Ok(entries) => (entries.flatten())
-            .map(|e| e.file_name().to_string_lossy().into_owned())
-            .collect(),
-        Err(_) => Vec::new(),
-    };
+    let names = output_set::entries(dir);
     let replaceable = simulated && names.iter().any(|n| n == SIMULATED);
     if replaceable {
         std::fs::remove_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     } else if !names.is_empty() {
-        let shown: Vec<&str> = names.iter().take(3).map(String::as_str).collect();
         let what = match simulated {
             true => "files that are not a simulated recording",
             false => "files, and a real acquisition replaces none",
         };
-        let why = format!("a recording needs a new or empty folder; this one holds {what}: {}{}; pass another --out", shown.join(", "), if names.len() > 3 { ", …" } else { "" });
+        let why = format!("a recording needs a new or empty folder; this one holds {what}: {}; pass another --out", output_set::listed(&names));
         return Err(Error::io(dir, std::io::Error::other(why)));
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;

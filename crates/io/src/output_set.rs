@@ -34,18 +34,28 @@ pub fn check_target(target: &Path, inputs: &[&Path]) -> Result<()> {
     if target.is_file() {
         return refuse("is a file; --out names the folder the outputs are written to".into());
     }
-    let Ok(entries) = std::fs::read_dir(target) else {
-        return Ok(());
-    };
-    let names: Vec<String> = entries
-        .flatten()
-        .map(|e| e.file_name().to_string_lossy().into_owned())
-        .collect();
+    let names = entries(target);
     if names.is_empty() || names.iter().any(|n| n == MARKER) {
         return Ok(());
     }
+    refuse(format!("the folder holds files that are no output of a specmux run ({}; a run's outputs carry {MARKER}), which writing the outputs (the folder is replaced whole) would delete: pass a new or empty folder", listed(&names)))
+}
+
+/// The names in folder `dir` (none where it is not a folder one can read).
+pub fn entries(dir: &Path) -> Vec<String> {
+    match std::fs::read_dir(dir) {
+        Ok(it) => (it.flatten())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect(),
+        Err(_) => Vec::new(),
+    }
+}
+
+/// The first three `names`, and "…" for the rest, for a one-line message.
+pub fn listed(names: &[String]) -> String {
     let shown: Vec<&str> = names.iter().take(3).map(String::as_str).collect();
-    refuse(format!("the folder holds files a specmux run did not write ({}{}), which writing the outputs (the folder is replaced whole) would delete: pass a new or empty folder", shown.join(", "), if names.len() > 3 { ", …" } else { "" }))
+    let more = if names.len() > 3 { ", …" } else { "" };
+    format!("{}{more}", shown.join(", "))
 }
 
 /// Refuse an output folder `target` that holds one of the run's `inputs` (which need not exist:
@@ -259,7 +269,7 @@ mod tests {
         std::fs::write(other.join("important.txt"), "keep").unwrap();
         let e = OutputSet::begin(&other).err().unwrap().to_string();
         assert!(
-            e.contains("important.txt") && e.contains("did not write"),
+            e.contains("important.txt") && e.contains("no output of a specmux run"),
             "{e}"
         );
         assert!(other.join("important.txt").exists());

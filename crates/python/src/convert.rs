@@ -95,6 +95,15 @@ pub fn check_frame(f: &Cube, what: &str, size: Option<(usize, usize)>) -> PyResu
     }
 }
 
+/// What `a` is, for an error: "float64 with 3 dimensions" for an array, "a list" otherwise.
+pub fn describe(a: &Bound<'_, PyAny>) -> PyResult<String> {
+    let array = (a.getattr("dtype")).and_then(|d| Ok((d.str()?, a.getattr("ndim")?)));
+    Ok(match array {
+        Ok((dtype, ndim)) => format!("{dtype} with {ndim} dimensions"),
+        Err(_) => format!("a {}", a.get_type().name()?),
+    })
+}
+
 /// True when `a` holds integers (`numpy.asarray(a).dtype.kind` is `i` or `u`): raw DN, as a
 /// camera delivers them.
 pub fn is_integer(a: &Bound<'_, PyAny>) -> PyResult<bool> {

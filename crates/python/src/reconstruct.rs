@@ -3,7 +3,7 @@
 //! frame after frame, with the real-time path) and `metrics` (an estimate against its truth).
 
 use crate::calibration;
-use crate::convert::{cube_array, is_integer, kept, library, to_cube, to_frame, to_py};
+use crate::convert::{cube_array, describe, is_integer, kept, library, to_cube, to_frame, to_py};
 use crate::error::{err, interruptible};
 use crate::experiment::PyExperiment;
 use numpy::{PyArray3, PyArrayMethods, PyUntypedArrayMethods};
@@ -220,14 +220,7 @@ impl PyReconstructor {
         let shape = [self.recon.unmixer.bands(), h, w];
         let out = match out.map(|a| a.cast_into::<PyArray3<f32>>()).transpose() {
             Err(e) => {
-                let a = e.into_inner();
-                let array = a
-                    .getattr("dtype")
-                    .and_then(|d| Ok((d.str()?, a.getattr("ndim")?)));
-                let kind = match array {
-                    Ok((dtype, ndim)) => format!("{dtype} with {ndim} dimensions"),
-                    Err(_) => format!("a {}", a.get_type().name()?),
-                };
+                let kind = describe(&e.into_inner())?;
                 return Err(err(format!(
                     "realtime: out must be a C-contiguous float32 array of shape {shape:?} (bands, height, width); this one is {kind}"
                 )));

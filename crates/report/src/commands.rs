@@ -486,7 +486,7 @@ pub fn timing(scene: &str, out: &Path, lib: &Library) -> Result<String> {
             &exp.file,
             "rig.timing",
             "absent",
-            "the experiment has no [rig.timing] section to report on",
+            "the experiment has no [rig.timing] section to report on (scenes/study-timing.toml and scenes/full-rig.toml have one)",
         )
     })?;
     let tw = specmux_twin::timing::weights(&cfg)?;
