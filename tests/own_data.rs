@@ -320,10 +320,12 @@ fn curves_given_as_csv_paths_are_read_beside_the_experiment() {
     for (from, to) in [
         ("wheel/red", "curves/red.csv"),
         ("camera/mono_qe", "qe.csv"),
+        ("illuminants/D65", "d65.csv"),
     ] {
         std::fs::copy(lib.join(format!("{from}.csv")), d.join("exp").join(to)).unwrap();
     }
     let base = "[scene]\nsize = [64, 64]\n";
+    let own_light = "[scene]\nsize = [64, 64]\nilluminant = \"d65.csv\"\n";
     let wheel = |red: &str| {
         format!("[rig.wheel]\nfilters = [\"{red}\", \"wheel/green\", \"wheel/blue\", \"paper/a\", \"paper/b\", \"paper/c\"]\n")
     };
@@ -333,12 +335,15 @@ fn curves_given_as_csv_paths_are_read_beside_the_experiment() {
     )
     .unwrap();
     let own = format!(
-        "{base}{}[rig.camera]\nqe = \"qe.csv\"\n",
+        "{own_light}{}[rig.camera]\nqe = \"qe.csv\"\n",
         wheel("curves/red.csv")
     );
     std::fs::write(d.join("exp/own.toml"), own).unwrap();
     ok(d, &["simulate", "exp/lib.toml", "--out", "a"]);
     ok(d, &["simulate", "exp/own.toml", "--out", "b"]);
+    // The figures light the cube with the experiment's own illuminant file too.
+    ok(d, &["demo", "--scene", "exp/own.toml", "--out", "c"]);
+    assert!(d.join("c/comparison.png").exists());
     let frame = |dir: &str| {
         specmux_io::exr::read(&d.join(dir).join("frame.exr"))
             .unwrap()
@@ -555,6 +560,26 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
         let (exr, _) = specmux_io::exr::read(&demo.join(format!("{stem}.exr"))).unwrap();
         assert_eq!(data, exr.data, "{stem}.npy holds the EXR's samples");
     }
+    // simulate --npy: the calibration frames' EXRs too.
+    std::fs::write(work.join("small.toml"), "[scene]\nsize = [64, 64]\n").unwrap();
+    let out = Command::new(&bin)
+        .current_dir(&work)
+        .args(["simulate", "small.toml", "--npy", "--out", "sim"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cal = work.join("sim/calibration");
+    let (s, data) = read_npy(&cal.join("pattern-6.npy"));
+    let (exr, _) = specmux_io::exr::read(&cal.join("pattern-6.exr")).unwrap();
+    assert_eq!(
+        (s, data),
+        (vec![64, 64], exr.data),
+        "pattern-6.npy holds the EXR's samples"
+    );
     // reconstruct.json, from the same binary with a --spectra folder: its provenance says so.
     let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");
     let out = Command::new(&bin)

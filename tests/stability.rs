@@ -590,6 +590,16 @@ fn timing_absurd_offsets() {
         run_toml("[rig.timing.wheel]\nindex_offset_deg = nan\n"),
         &["rig.timing.wheel.index_offset_deg"],
     );
+    // Half a segment (83.333… µs at 1000 rev/s) typed to five digits: W is nearly singular
+    // (condition 2.5e5), and its inverse would multiply the demultiplexing leak that much.
+    let half = ["8.3333e-5"; 6].join(", ");
+    refused(
+        "timing: half a segment of DMD delay, typed to five digits, corrected",
+        run_toml(&format!(
+            "[reconstruct]\ncrosstalk = \"timing\"\n[rig.timing.dmd]\ndelays_s = [{half}]\n"
+        )),
+        &["rig.timing", "condition number", "crosstalk = \"none\""],
+    );
 }
 
 // ---------------------------------------------------------------- dynamic range and precision

@@ -131,7 +131,23 @@ pub struct Calibration {
 /// maximised within ± this many bins of the strongest bin near the design carrier.
 const SEARCH_BINS: i64 = 2;
 
+/// What every figure made with an oracle calibration carries (`[calibration] source =
+/// "oracle"`): it used what no rig can know.
+pub const ORACLE_LABEL: &str = "ORACLE calibration ([calibration] source = \"oracle\"): the simulator's exact patterns and weights, which no rig knows; these are not a rig's figures";
+
 impl Calibration {
+    /// True when the calibration is the simulator's oracle, not captures.
+    pub fn is_oracle(&self) -> bool {
+        self.source == "oracle"
+    }
+
+    /// What a report says of this calibration: [`ORACLE_LABEL`] for the oracle, then
+    /// [`Calibration::warning`].
+    pub fn notes(&self) -> impl Iterator<Item = String> {
+        let oracle = self.is_oracle().then(|| ORACLE_LABEL.to_string());
+        oracle.into_iter().chain(self.warning())
+    }
+
     /// A warning naming the carriers that do not stand out of their captures' spectra, whose
     /// channels would be demultiplexed from noise; None when every carrier does.
     pub fn warning(&self) -> Option<String> {

@@ -376,11 +376,11 @@ impl Reconstructor {
     }
 
     /// What to say before trusting a reconstruction of a frame whose [`Reconstructor::frame_snr`]
-    /// is `mean_snr`: the calibration's carriers that do not stand out of their captures' noise,
-    /// and a frame whose mean signal is under its noise.
+    /// is `mean_snr`: an oracle calibration's label, the calibration's carriers that do not stand
+    /// out of their captures' noise, and a frame whose mean signal is under its noise.
     pub fn warnings(&self, mean_snr: Option<f64>) -> Vec<String> {
         let dim = mean_snr.and_then(crate::noise::snr_warning);
-        self.calibration.warning().into_iter().chain(dim).collect()
+        self.calibration.notes().chain(dim).collect()
     }
 
     /// The whole chain on one frame: linearise, demultiplex, de-alias (on what each pattern

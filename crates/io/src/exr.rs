@@ -55,6 +55,19 @@ pub fn write(path: &Path, cube: &Cube, names: &[String]) -> Result<()> {
     })
 }
 
+/// "pixel (x, y) of channel `name` is v" for the first value of a cube read with channel
+/// `names` that `bad` picks (a NaN, a negative radiance), for an error naming where it is.
+pub fn first_value(cube: &Cube, names: &[String], bad: impl Fn(f32) -> bool) -> Option<String> {
+    let p = cube.data.iter().position(|&v| bad(v))?;
+    let n = (cube.width * cube.height).max(1);
+    let (k, x, y) = (p / n, p % cube.width, (p % n) / cube.width);
+    let name = names.get(k).map_or(k.to_string(), |s| s.clone());
+    Some(format!(
+        "pixel ({x}, {y}) of channel `{name}` is {}",
+        cube.data[p]
+    ))
+}
+
 /// Read every channel of the first layer of an EXR file: the cube (planes in the file's
 /// channel order, which is name order) and the channel names.
 pub fn read(path: &Path) -> Result<(Cube, Vec<String>)> {

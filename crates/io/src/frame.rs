@@ -68,9 +68,16 @@ pub fn grey16_from_bytes(bytes: &[u8], path: &Path) -> Result<Cube> {
     }
     let img = reader.decode().map_err(|e| bad(e.to_string()))?;
     let image::DynamicImage::ImageLuma16(g) = img else {
+        use image::ColorType::*;
+        let kind = match img.color() {
+            L8 => "an 8-bit greyscale".to_string(),
+            La8 | La16 => "a greyscale-with-alpha".to_string(),
+            Rgb8 | Rgba8 => "an 8-bit colour".to_string(),
+            Rgb16 | Rgba16 => "a 16-bit colour".to_string(),
+            c => format!("a {c:?}"),
+        };
         return Err(bad(format!(
-            "a {:?} image is a preview, not a camera frame: pass frame.exr or a 16-bit greyscale PNG or TIFF of raw DN",
-            img.color()
+            "{kind} image is a preview, not a camera frame: pass frame.exr or a 16-bit greyscale PNG or TIFF of raw DN"
         )));
     };
     let (w, h) = (g.width() as usize, g.height() as usize);
@@ -112,7 +119,7 @@ pub fn read_calibration(
     let missing = |stem: &str| {
         Error::io(
         dir.join(format!("{stem}.exr")),
-        std::io::Error::new(std::io::ErrorKind::NotFound, "a calibration folder holds dark.exr and flat.exr (or neither) and pattern-1.exr … pattern-N.exr, one per carrier"),
+        std::io::Error::new(std::io::ErrorKind::NotFound, "missing: a calibration folder holds dark.exr and flat.exr (or neither) and pattern-1.exr … pattern-N.exr, one per carrier"),
     )
     };
     let sized = |p: PathBuf| -> Result<Cube> {
@@ -151,25 +158,28 @@ pub fn read_calibration(
     ))
 }
 
-/// Write `frames` as a calibration folder `read_calibration` reads back (EXR, one channel each).
-/// Linear patterns beside dark and flat frames (the oracle) would read back as raw: refused.
-pub fn write_calibration(dir: &Path, frames: &CalibrationFrames) -> Result<()> {
+/// Write `frames` as a calibration folder `read_calibration` reads back (EXR, one channel each;
+/// with `npy`, each also as `.npy`). Linear patterns beside dark and flat frames (the oracle)
+/// would read back as raw: refused.
+pub fn write_calibration(dir: &Path, frames: &CalibrationFrames, npy: bool) -> Result<()> {
     if frames.patterns_linear && frames.dark.is_some() {
         return Err(Error::Shape(
             "oracle calibration frames are not captures and are not written".into(),
         ));
     }
-    let y = ["Y".to_string()];
+    let write = |stem: &str, frame: &Cube| -> Result<()> {
+        exr::write(&dir.join(format!("{stem}.exr")), frame, &["Y".to_string()])?;
+        match npy {
+            true => crate::npy::write(&dir.join(format!("{stem}.npy")), frame),
+            false => Ok(()),
+        }
+    };
     if let (Some(d), Some(f)) = (&frames.dark, &frames.flat) {
-        exr::write(&dir.join("dark.exr"), d, &y)?;
-        exr::write(&dir.join("flat.exr"), f, &y)?;
+        write("dark", d)?;
+        write("flat", f)?;
     }
     for k in 0..frames.patterns.planes {
-        exr::write(
-            &dir.join(format!("pattern-{}.exr", k + 1)),
-            &frames.patterns.extract(k),
-            &y,
-        )?;
+        write(&format!("pattern-{}", k + 1), &frames.patterns.extract(k))?;
     }
     Ok(())
 }

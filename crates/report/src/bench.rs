@@ -438,6 +438,9 @@ pub struct BenchRow {
     /// The frame [width, height] it was timed on (`[reconstruct] auto_table` scales the time
     /// by the pixel count).
     pub frame: [usize; 2],
+    /// Where the calibration came from: "captures" (what a rig records) or "oracle" (the
+    /// simulator's exact patterns: no rig's figures; the table marks the row ORACLE).
+    pub calibration: String,
 }
 
 /// Median of a non-empty slice (mean of the middle two for an even count).
@@ -571,6 +574,7 @@ pub fn work_precision_on(
             stage_seconds: st.map(|v| median(&v)),
             pareto: false,
             frame: [sim.frame.width, sim.frame.height],
+            calibration: sim.calibration.source.clone(),
         });
     }
     let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.seconds, r.psnr_db)).collect();
@@ -590,8 +594,13 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
             true => r.stage_seconds.map(|t| format!("{t:.3}")).join(" / "),
             false => "– (one submission)".to_string(),
         };
+        let oracle = if r.calibration == "oracle" {
+            " (ORACLE calibration)"
+        } else {
+            ""
+        };
         s += &format!(
-            "| {} | {} | {:.2} | {:.4} | {} | {:.2} | {:.4} | {stages} | {} |\n",
+            "| {}{oracle} | {} | {:.2} | {:.4} | {} | {:.2} | {:.4} | {stages} | {} |\n",
             r.label,
             r.device,
             r.psnr_db,

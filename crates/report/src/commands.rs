@@ -260,10 +260,11 @@ pub fn bench(
     };
     say!(
         text,
-        "{}: {}×{}, {repeats} timed runs per setting, on {}",
+        "{}: {}×{}, {repeats} timed run{} per setting, on {}",
         exp.file,
         sim.frame.width,
         sim.frame.height,
+        if repeats == 1 { "" } else { "s" },
         device.describe()
     );
     if let Some(why) = crate::bench::gap_left_out(&sim) {
@@ -276,14 +277,21 @@ pub fn bench(
         repeats,
     )?;
     let md = crate::bench::work_precision_markdown(&rows);
+    if sim.calibration.is_oracle() {
+        say!(text, "{}", specmux_core::calibration::ORACLE_LABEL);
+    }
     say!(text, "{md}");
     let files = OutputSet::begin(out)?;
     specmux_io::atomic::write_bytes(&files.path("bench.md"), md.as_bytes())?;
     write_report(&files.path("bench.json"), lib, "rows", &rows)?;
+    let oracle = match sim.calibration.is_oracle() {
+        true => ", ORACLE calibration",
+        false => "",
+    };
     crate::bench::work_precision_plot(
         &files.path("pareto.png"),
         &format!(
-            "{} {}×{}: error against run time, {}",
+            "{} {}×{}: error against run time, {}{oracle}",
             scene,
             sim.frame.width,
             sim.frame.height,
@@ -546,7 +554,7 @@ pub fn ptc(
     let r = specmux_twin::sensor::photon_transfer(&sensor, &levels)?;
     say!(
         text,
-        "{:<22} {:>12} {:>12}",
+        "{:<26} {:>12} {:>12}",
         "EMVA 1288",
         "measured",
         "given"
@@ -558,7 +566,9 @@ pub fn ptc(
             r.read_noise_e,
             (cfg.read_noise_e.powi(2) + cfg.dark_electrons()).sqrt(),
         ),
-        ("full well (e⁻)", r.full_well_e, cfg.full_well_e),
+        // EMVA 1288's saturation capacity μ_e.sat, beside the model's full well (the clip level
+        // sits above it: docs/sensor.md).
+        ("μ_e.sat / full well (e⁻)", r.full_well_e, cfg.full_well_e),
         (
             "PRNU (%)",
             100.0 * r.prnu_fraction,
@@ -566,7 +576,7 @@ pub fn ptc(
         ),
         ("DSNU (e⁻)", r.dsnu_e, cfg.dsnu_e),
     ] {
-        say!(text, "{name:<22} {m:>12.4} {g:>12.4}");
+        say!(text, "{name:<26} {m:>12.4} {g:>12.4}");
     }
     say!(
         text,
@@ -628,7 +638,7 @@ pub fn simulate(
             if let Some(frames) = &frames {
                 let dir = files.path("calibration");
                 std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-                specmux_io::frame::write_calibration(&dir, frames)?;
+                specmux_io::frame::write_calibration(&dir, frames, npy)?;
             }
             Ok(())
         },
@@ -738,12 +748,16 @@ pub fn reconstruct(
     }
     let run = reconstruct_on_device(&device, &recon, &frame)?;
     let (cube, stats) = (run.cube, run.unmix);
-    say!(
-        text,
-        "{} ({} pixels bound by r ≥ 0)",
-        run.times,
-        stats.constrained_pixels
-    );
+    // The joint method fits α from the frame: no per-pixel unmixing ran to count.
+    match stats.pixels {
+        0 => say!(text, "{}", run.times),
+        _ => say!(
+            text,
+            "{} ({} pixels bound by r ≥ 0)",
+            run.times,
+            stats.bound_pixels
+        ),
+    }
     if let Some(j) = &run.joint {
         text += &run::joint_summary(j);
         if let Some(w) = j.warning() {

@@ -471,7 +471,7 @@ pub fn write_figures(
     let grid = exp.scene.grid(&exp.file)?;
     let (light, lighting, unit, y_label) = match exp.scene.quantity {
         Quantity::Reflectance => (
-            Some(lib.curve(&exp.scene.illuminant)?),
+            Some(exp.curve(lib, &exp.scene.illuminant)?),
             format!("reflectance under {}", exp.scene.illuminant),
             "reflectance",
             "reflectance (1 = white)",

@@ -142,6 +142,12 @@ pub struct SweepRow {
     pub seconds: Option<f64>,
     /// Why the run was refused, if it was.
     pub refused: Option<String>,
+    /// The de-aliasing that ran ("auto: joint (52 it)", "gap (20 it)"; "fourier" for none):
+    /// the x̂ figure is its estimate.
+    pub method: Option<String>,
+    /// Where the calibration came from: "captures", or "oracle" (the simulator's exact
+    /// patterns: no rig's figures; the table's note says ORACLE).
+    pub calibration: Option<String>,
 }
 
 /// Run `base` at every point of the grid. The imaged patterns and calibration captures are kept
@@ -162,7 +168,10 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
             Err(e @ Error::Interrupted(_)) => return Err(e),
             Ok((rep, _)) => {
                 let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));
-                let x = find("gap").or_else(|| find("demultiplex"));
+                // The de-aliased channels' row (GAP, GAP-TV, joint, auto), after demultiplexing.
+                let dealiased = (rep.results.iter())
+                    .find(|r| r.against.starts_with("x (true") && r.stage != "demultiplex");
+                let x = dealiased.or_else(|| find("demultiplex"));
                 let cube = find("unmix");
                 SweepRow {
                     values,
@@ -180,6 +189,12 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                         }),
                     seconds: Some(rep.reconstruction_seconds),
                     refused: None,
+                    method: Some(
+                        dealiased
+                            .map_or("fourier", |r| r.stage.as_str())
+                            .to_string(),
+                    ),
+                    calibration: Some(rep.calibration.source.clone()),
                 }
             }
             Err(e) => SweepRow {
@@ -191,6 +206,8 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                 carrier_gain: None,
                 seconds: None,
                 refused: Some(e.to_string()),
+                method: None,
+                calibration: None,
             },
         };
         rows.push(row);
@@ -206,7 +223,7 @@ pub fn markdown(vary: &[Vary], rows: &[SweepRow]) -> String {
     let f = |v: Option<f64>, p: usize| v.map_or("—".to_string(), |x| format!("{x:.p$}"));
     let keys: Vec<&str> = vary.iter().map(|v| v.key.as_str()).collect();
     let mut s = format!(
-        "| {} | carrier gain | x̂ PSNR dB | cube PSNR dB | cube SSIM | cube SAM ° | recon s | note |\n|{}---|---|---|---|---|---|---|\n",
+        "| {} | method | carrier gain | x̂ PSNR dB | cube PSNR dB | cube SSIM | cube SAM ° | recon s | note |\n|{}---|---|---|---|---|---|---|---|\n",
         keys.join(" | "),
         "---|".repeat(keys.len())
     );
@@ -214,15 +231,23 @@ pub fn markdown(vary: &[Vary], rows: &[SweepRow]) -> String {
         let gain = r
             .carrier_gain
             .map_or("—".to_string(), |(lo, hi)| format!("{lo:.3}–{hi:.3}"));
+        let oracle = r.calibration.as_deref() == Some("oracle");
+        let note = match (&r.refused, oracle) {
+            (Some(why), _) => why.as_str(),
+            (None, true) => {
+                "ORACLE calibration: the simulator's exact patterns, not a rig's figures"
+            }
+            (None, false) => "",
+        };
         s += &format!(
-            "| {} | {gain} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {gain} | {} | {} | {} | {} | {} | {note} |\n",
             r.values.join(" | "),
+            r.method.as_deref().unwrap_or("—"),
             f(r.channels_psnr_db, 2),
             f(r.cube_psnr_db, 2),
             f(r.cube_ssim, 4),
             f(r.cube_sam_deg, 2),
             f(r.seconds, 3),
-            r.refused.as_deref().unwrap_or("")
         );
     }
     s

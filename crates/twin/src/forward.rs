@@ -418,8 +418,13 @@ impl Stage for SceneStage {
     }
     fn describe(&self) -> String {
         let s = &self.cfg;
+        // A seed draws a procedural scene; a file's cube has none.
+        let seed = match s.source.contains(':') {
+            true => String::new(),
+            false => format!(", seed {}", s.seed),
+        };
         format!(
-            "{} {}×{}, {} on {}–{} nm / {} nm, seed {}",
+            "{} {}×{}, {} on {}–{} nm / {} nm{seed}",
             s.source,
             s.size[0],
             s.size[1],
@@ -430,7 +435,6 @@ impl Stage for SceneStage {
             s.wavelengths_nm[0],
             s.wavelengths_nm[1],
             s.wavelengths_nm[2],
-            s.seed
         )
     }
 }

@@ -120,18 +120,20 @@ impl Rig {
             }
             None => None,
         };
-        // Transmittances, QE and light are physical quantities: never negative.
-        let named = |key: &str, name: &str| {
+        // Transmittances, QE and light are physical quantities: never negative; a transmittance
+        // or a QE (`fraction`) is at most 1.
+        let named = |key: &str, name: &str, fraction: bool| {
             let bad = |why: &str| Error::config(&exp.file, key, format!("\"{name}\""), why);
             let c = exp.curve(lib, name).map_err(|e| bad(&e.to_string()))?;
-            match c
-                .wavelengths()
-                .iter()
-                .zip(c.values())
-                .find(|(_, &v)| v < 0.0)
-            {
-                Some((w, v)) => Err(bad(&format!(
+            let samples = || c.wavelengths().iter().zip(c.values());
+            if let Some((w, v)) = samples().find(|(_, &v)| v < 0.0) {
+                return Err(bad(&format!(
                     "value {v} at {w} nm is negative: a transmittance, QE or light cannot be"
+                )));
+            }
+            match samples().find(|(_, &v)| fraction && v > 1.0) {
+                Some((w, v)) => Err(bad(&format!(
+                    "value {v} at {w} nm is above 1: a transmittance or QE is a fraction 0..1"
                 ))),
                 None => Ok(c),
             }
@@ -142,16 +144,16 @@ impl Rig {
             .filters
             .iter()
             .enumerate()
-            .map(|(i, n)| named(&format!("rig.wheel.filters[{i}]"), n))
+            .map(|(i, n)| named(&format!("rig.wheel.filters[{i}]"), n, true))
             .collect::<Result<Vec<_>>>()?;
-        let qe = named("rig.camera.qe", &exp.rig.camera.qe)?;
+        let qe = named("rig.camera.qe", &exp.rig.camera.qe, true)?;
         let illuminant = match exp.scene.quantity {
-            Quantity::Reflectance => Some(named("scene.illuminant", &exp.scene.illuminant)?),
+            Quantity::Reflectance => Some(named("scene.illuminant", &exp.scene.illuminant, false)?),
             Quantity::Radiance => None,
         };
         let radiance_light = match exp.scene.quantity {
             Quantity::Radiance if !exp.scene.illuminant.is_empty() => {
-                let l = named("scene.illuminant", &exp.scene.illuminant)?;
+                let l = named("scene.illuminant", &exp.scene.illuminant, false)?;
                 if let Some(wl) = grid.wavelengths().into_iter().find(|&w| l.eval(w) <= 0.0) {
                     let why = format!("must be positive on every band; it is not at {wl} nm");
                     return Err(Error::config(&exp.file, "scene.illuminant", &l.name, &why));

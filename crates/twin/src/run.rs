@@ -9,7 +9,7 @@ use crate::rig::Rig;
 use crate::scene::Materials;
 use crate::sensor::Sensor;
 use serde::Serialize;
-use specmux_core::calibration::{Calibration, CalibrationFrames, MeasuredCarrier};
+use specmux_core::calibration::{self, Calibration, CalibrationFrames, MeasuredCarrier};
 use specmux_core::crosstalk::{self, ErrorBudget};
 use specmux_core::demux::{Demux, SUPER_GAUSSIAN_ORDER};
 use specmux_core::metrics::{self, Metrics};
@@ -389,7 +389,7 @@ fn warnings(
     rig.warnings
         .iter()
         .cloned()
-        .chain(recon.calibration.warning())
+        .chain(recon.calibration.notes())
         .chain(frame.warnings())
         .chain(joint.and_then(|j| j.warning()))
         .chain(flagged)
@@ -489,7 +489,13 @@ fn error_budget(exp: &Experiment, rig: &Rig, channels: &Cube) -> Result<Option<V
 impl RunReport {
     /// The result table as fixed-width text.
     pub fn table(&self) -> String {
-        let mut s = format!(
+        // An oracle's figures say so before any of them (and not again among the warnings).
+        let oracle = self.calibration.source == "oracle";
+        let mut s = match oracle {
+            true => format!("{}\n", calibration::ORACLE_LABEL),
+            false => String::new(),
+        };
+        s += &format!(
             "{:<20} {:<34} {:>9} {:>7} {:>8} {:>8} {:>10}\n",
             "stage", "against", "PSNR dB", "SSIM", "NRMSE", "SAM °", "seconds"
         );
@@ -544,7 +550,11 @@ impl RunReport {
                 );
             }
         }
-        for w in &self.warnings {
+        for w in self
+            .warnings
+            .iter()
+            .filter(|w| *w != calibration::ORACLE_LABEL)
+        {
             s += &format!("\nwarning: {w}");
         }
         s += "\nforward stages: ";
@@ -565,7 +575,7 @@ impl RunReport {
         if self.unmix.pixels > 0 {
             s += &format!(
                 "unmix: {} of {} pixels hit the non-negativity bound\n",
-                self.unmix.constrained_pixels, self.unmix.pixels
+                self.unmix.bound_pixels, self.unmix.pixels
             );
         }
         s += &format!(
@@ -611,10 +621,14 @@ fn joint_noise_line(j: &specmux_core::joint::JointStats) -> String {
         j.prior, j.spectral_prior, j.residual_ratio
     );
     if j.reweight_rounds > 0 {
-        s += &format!(
-            "; TV weights refreshed {} times (reweighted TV)",
-            j.reweight_rounds
-        );
+        let n = j.reweight_rounds;
+        let times = if n == 1 { "once" } else { "times" };
+        let n = if n == 1 {
+            String::new()
+        } else {
+            format!("{n} ")
+        };
+        s += &format!("; TV weights refreshed {n}{times} (reweighted TV)");
     }
     if j.saturated_pixels > 0 {
         s += &format!(

@@ -74,6 +74,14 @@ pub fn parse(path: &Path, text: &str) -> Result<Table> {
                     }
                     row.push(v);
                 }
+                if let Some(prev) = rows
+                    .last()
+                    .map(|r: &Vec<f64>| r[0])
+                    .filter(|&p| row[0] <= p)
+                {
+                    let why = format!("wavelengths must increase: {} nm follows {prev} nm", row[0]);
+                    return Err(err(line_no, why));
+                }
                 rows.push(row);
             }
         }
@@ -126,8 +134,11 @@ mod tests {
         );
         let e = p("# provenance: x\nwavelength_nm,a\n400,NaN\n500,1\n").unwrap_err();
         assert!(e.to_string().contains("not finite"));
-        let e = p("# provenance: x\nwavelength_nm,a\n500,1\n400,1\n").unwrap_err();
-        assert!(e.to_string().contains("increase"), "{e}");
+        let e = p("# provenance: x\nwavelength_nm,a\n500,1\n\n400,1\n").unwrap_err();
+        assert!(
+            e.to_string().contains("t.csv:5") && e.to_string().contains("increase"),
+            "{e}"
+        );
         assert!(p("wavelength_nm,a\n400,1\n500,1\n").is_err());
         assert!(p("# provenance: x\nnm,a\n400,1\n").is_err());
     }

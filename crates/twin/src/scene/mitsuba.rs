@@ -179,8 +179,8 @@ fn read_named(path: &Path, names: &[String]) -> Result<Cube> {
     if let Some((f, n)) = found.iter().zip(names).find(|(f, n)| f != n) {
         return Err(err(format!("channel `{f}` where `{n}` was expected")));
     }
-    if !cube.all_finite() {
-        return Err(err("contains NaN or infinite values".into()));
+    if let Some(at) = specmux_io::exr::first_value(&cube, names, |v| !v.is_finite()) {
+        return Err(err(format!("{at}: a render's values must be finite")));
     }
     Ok(cube)
 }

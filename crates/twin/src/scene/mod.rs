@@ -194,20 +194,15 @@ fn exr_scene(cfg: &SceneConfig, file: &str, grid: &Grid) -> Result<Scene> {
             }
         }
     }
-    if !cube.all_finite() {
-        return Err(err("contains NaN or infinite values".into()));
+    if let Some(at) = specmux_io::exr::first_value(&cube, &names, |v| !v.is_finite()) {
+        return Err(err(format!("{at}: a scene's values must be finite")));
     }
-    if let Some(p) = cube.data.iter().position(|&v| v < 0.0) {
-        let n = cube.width * cube.height;
-        let (k, x, y) = (p / n, p % cube.width, (p % n) / cube.width);
+    if let Some(at) = specmux_io::exr::first_value(&cube, &names, |v| v < 0.0) {
         let what = match cfg.quantity {
             Quantity::Reflectance => "a reflectance",
             Quantity::Radiance => "a radiance",
         };
-        return Err(err(format!(
-            "pixel ({x}, {y}) of channel `{}` is {}: {what} cannot be negative",
-            names[k], cube.data[p]
-        )));
+        return Err(err(format!("{at}: {what} cannot be negative")));
     }
     Ok(Scene {
         name: rel.to_string(),
