@@ -131,6 +131,9 @@ pub struct Calibration {
 /// maximised within ± this many bins of the strongest bin near the design carrier.
 const SEARCH_BINS: i64 = 2;
 
+/// The `source` of an oracle calibration (the simulator's exact patterns), as reports write it.
+pub const ORACLE: &str = "oracle";
+
 /// What every figure made with an oracle calibration carries (`[calibration] source =
 /// "oracle"`): it used what no rig can know.
 pub const ORACLE_LABEL: &str = "ORACLE calibration ([calibration] source = \"oracle\"): the simulator's exact patterns and weights, which no rig knows; these are not a rig's figures";
@@ -138,7 +141,7 @@ pub const ORACLE_LABEL: &str = "ORACLE calibration ([calibration] source = \"ora
 impl Calibration {
     /// True when the calibration is the simulator's oracle, not captures.
     pub fn is_oracle(&self) -> bool {
-        self.source == "oracle"
+        self.source == ORACLE
     }
 
     /// What a report says of this calibration: [`ORACLE_LABEL`] for the oracle, then

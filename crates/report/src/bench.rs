@@ -594,7 +594,7 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
             true => r.stage_seconds.map(|t| format!("{t:.3}")).join(" / "),
             false => "– (one submission)".to_string(),
         };
-        let oracle = if r.calibration == "oracle" {
+        let oracle = if r.calibration == specmux_core::calibration::ORACLE {
             " (ORACLE calibration)"
         } else {
             ""

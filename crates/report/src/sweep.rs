@@ -231,7 +231,7 @@ pub fn markdown(vary: &[Vary], rows: &[SweepRow]) -> String {
         let gain = r
             .carrier_gain
             .map_or("—".to_string(), |(lo, hi)| format!("{lo:.3}–{hi:.3}"));
-        let oracle = r.calibration.as_deref() == Some("oracle");
+        let oracle = r.calibration.as_deref() == Some(specmux_core::calibration::ORACLE);
         let note = match (&r.refused, oracle) {
             (Some(why), _) => why.as_str(),
             (None, true) => {

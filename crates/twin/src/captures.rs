@@ -221,7 +221,7 @@ fn from_planes(
 fn source_name(s: CalibrationSource) -> &'static str {
     match s {
         CalibrationSource::Captures => "captures",
-        CalibrationSource::Oracle => "oracle",
+        CalibrationSource::Oracle => specmux_core::calibration::ORACLE,
     }
 }
 

@@ -490,7 +490,7 @@ impl RunReport {
     /// The result table as fixed-width text.
     pub fn table(&self) -> String {
         // An oracle's figures say so before any of them (and not again among the warnings).
-        let oracle = self.calibration.source == "oracle";
+        let oracle = self.calibration.source == calibration::ORACLE;
         let mut s = match oracle {
             true => format!("{}\n", calibration::ORACLE_LABEL),
             false => String::new(),
