@@ -286,8 +286,8 @@ fn rank_table(s: &Setup, paper: &[Ranked], ranked: &[search::TopK]) -> String {
     t
 }
 
-/// Simulate the base wheel, the paper's best sets and the predicted-RMSE best sets (`paper`, `ours`) on
-/// every scene of `sc`.
+/// Simulate the base wheel, the paper's best sets and the predicted-RMSE best sets (`paper`,
+/// `ours`) on every scene of `sc`.
 fn simulate_sets(
     a: &FilterArgs,
     base: &Experiment,
