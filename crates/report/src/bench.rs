@@ -614,6 +614,41 @@ pub fn work_precision_markdown(rows: &[BenchRow]) -> String {
     s
 }
 
+/// What `method = "auto"` would pick from these very measurements at the default budget of a
+/// frame of `pixels` (the committed table is a copy of such rows): the plot rings it, the table
+/// names it.
+pub fn auto_pick(rows: &[BenchRow], pixels: usize) -> Option<auto::Choice> {
+    let entries: Vec<auto::Entry> = rows
+        .iter()
+        .filter(|r| r.seconds > 0.0 && r.seconds.is_finite() && r.psnr_db.is_finite())
+        .filter(|r| {
+            let s = &r.setting;
+            let noise_weighted = s.noise != NoiseAware::Off;
+            auto::tabled(
+                s.method,
+                s.iterations,
+                s.crop,
+                s.window,
+                s.prior,
+                noise_weighted,
+                s.reweight_rounds,
+            )
+        })
+        .map(|r| auto::Entry {
+            method: r.setting.method,
+            iterations: r.setting.iterations,
+            seconds: auto::at_reference(r.seconds, pixels),
+            psnr_db: r.psnr_db,
+        })
+        .collect();
+    let table = auto::Table {
+        device: "this run",
+        scene: "this run's scene",
+        entries: &entries,
+    };
+    auto::pick_from(table, auto::default_budget(pixels), pixels)
+}
+
 /// Final-cube PSNR against median run time, log time axis (ln t drawn linearly, ticked at 1, 2
 /// and 5 × 10ⁿ s, so that every decade gets labels), one colour per method, the Pareto
 /// front as a line through its points, each labelled with its setting, and the setting that
@@ -640,35 +675,7 @@ pub fn work_precision_plot(
         (p0, p1) = (p0.min(r.psnr_db), p1.max(r.psnr_db));
     }
     let pad = 0.05 * (p1 - p0).max(0.1);
-    // What `auto` would pick from these very measurements (the committed table is a copy).
-    let entries: Vec<auto::Entry> = ok
-        .iter()
-        .filter(|r| {
-            let s = &r.setting;
-            let noise_weighted = s.noise != NoiseAware::Off;
-            auto::tabled(
-                s.method,
-                s.iterations,
-                s.crop,
-                s.window,
-                s.prior,
-                noise_weighted,
-                s.reweight_rounds,
-            )
-        })
-        .map(|r| auto::Entry {
-            method: r.setting.method,
-            iterations: r.setting.iterations,
-            seconds: auto::at_reference(r.seconds, pixels),
-            psnr_db: r.psnr_db,
-        })
-        .collect();
-    let table = auto::Table {
-        device: "this run",
-        scene: "this run's scene",
-        entries: &entries,
-    };
-    let auto = auto::pick_from(table, auto::default_budget(pixels), pixels);
+    let auto = auto_pick(rows, pixels);
     // The time axis, with room for the labels right of the slowest point.
     let (x0, x1) = (t0 / 1.3, t1 * 2.5);
     plot::render_png(path, (1000, 640), |root| {

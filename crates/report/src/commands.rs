@@ -276,7 +276,11 @@ pub fn bench(
         &crate::bench::grid_for(&sim, &device),
         repeats,
     )?;
-    let md = crate::bench::work_precision_markdown(&rows);
+    let mut md = crate::bench::work_precision_markdown(&rows);
+    // The setting the plot rings, in words.
+    if let Some(a) = crate::bench::auto_pick(&rows, sim.frame.pixels()) {
+        md += &format!("\n`method = \"auto\"` from these rows: {}\n", a.reason);
+    }
     if sim.calibration.is_oracle() {
         say!(text, "{}", specmux_core::calibration::ORACLE_LABEL);
     }
