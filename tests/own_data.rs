@@ -531,17 +531,18 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
     std::fs::copy(env!("CARGO_BIN_EXE_specmux"), &bin).unwrap();
     let work = d.join("empty");
     std::fs::create_dir_all(&work).unwrap();
-    let out = Command::new(&bin)
-        .current_dir(&work)
-        .env_remove("SPECMUX_SPECTRA")
-        .args(["demo", "--size", "64", "--npy"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // The installed binary in `work`, with the embedded library; it must succeed.
+    let run = |args: &[&str]| {
+        let out = Command::new(&bin)
+            .current_dir(&work)
+            .env_remove("SPECMUX_SPECTRA")
+            .args(args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{args:?}: {err}");
+    };
+    run(&["demo", "--size", "64", "--npy"]);
     let demo = work.join("out/demo");
     let report = read_json(&demo.join("report.json"));
     assert_eq!(
@@ -562,16 +563,7 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
     }
     // simulate --npy: the calibration frames' EXRs too.
     std::fs::write(work.join("small.toml"), "[scene]\nsize = [64, 64]\n").unwrap();
-    let out = Command::new(&bin)
-        .current_dir(&work)
-        .args(["simulate", "small.toml", "--npy", "--out", "sim"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run(&["simulate", "small.toml", "--npy", "--out", "sim"]);
     let cal = work.join("sim/calibration");
     let (s, data) = read_npy(&cal.join("pattern-6.npy"));
     let (exr, _) = specmux_io::exr::read(&cal.join("pattern-6.exr")).unwrap();
