@@ -143,6 +143,12 @@ impl Cube {
         self.data.iter().cloned().fold(f32::MIN, f32::max)
     }
 
+    /// (plane, x, y) of the value at index `i` of `data`.
+    pub fn place(&self, i: usize) -> (usize, usize, usize) {
+        let n = (self.width * self.height).max(1);
+        (i / n, i % self.width.max(1), (i % n) / self.width.max(1))
+    }
+
     /// True when every value is finite.
     pub fn all_finite(&self) -> bool {
         all_finite(&self.data)
@@ -166,7 +172,7 @@ impl Cube {
             (_, Some(k)) => format!("{what}[{k}]: "),
         };
         let at = |p: usize| {
-            let (k, x, y) = (p / n, p % self.width, (p % n) / self.width);
+            let (k, x, y) = self.place(p);
             let name = named((self.planes > 1).then_some(k));
             format!(
                 "{name}pixel ({x}, {y}) is {}",

@@ -59,8 +59,7 @@ pub fn write(path: &Path, cube: &Cube, names: &[String]) -> Result<()> {
 /// `names` that `bad` picks (a NaN, a negative radiance), for an error naming where it is.
 pub fn first_value(cube: &Cube, names: &[String], bad: impl Fn(f32) -> bool) -> Option<String> {
     let p = cube.data.iter().position(|&v| bad(v))?;
-    let n = (cube.width * cube.height).max(1);
-    let (k, x, y) = (p / n, p % cube.width, (p % n) / cube.width);
+    let (k, x, y) = cube.place(p);
     let name = names.get(k).map_or(k.to_string(), |s| s.clone());
     Some(format!(
         "pixel ({x}, {y}) of channel `{name}` is {}",

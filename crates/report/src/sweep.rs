@@ -142,8 +142,8 @@ pub struct SweepRow {
     pub seconds: Option<f64>,
     /// Why the run was refused, if it was.
     pub refused: Option<String>,
-    /// The de-aliasing that ran ("auto: joint (52 it)", "gap (20 it)"; "fourier" for none):
-    /// the x̂ figure is its estimate.
+    /// The de-aliasing that ran, as its result row names it ("auto: joint (52 it)", "gap (Gap,
+    /// 20 it)", "gap (Fourier, 0 it)"): the x̂ figure is its estimate.
     pub method: Option<String>,
     /// Where the calibration came from: "captures", or "oracle" (the simulator's exact
     /// patterns: no rig's figures; the table's note says ORACLE).
@@ -168,10 +168,9 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
             Err(e @ Error::Interrupted(_)) => return Err(e),
             Ok((rep, _)) => {
                 let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));
-                // The de-aliased channels' row (GAP, GAP-TV, joint, auto), after demultiplexing.
-                let dealiased = (rep.results.iter())
+                // The de-aliased channels' row (every method has one), after demultiplexing's.
+                let x = (rep.results.iter())
                     .find(|r| r.against.starts_with("x (true") && r.stage != "demultiplex");
-                let x = dealiased.or_else(|| find("demultiplex"));
                 let cube = find("unmix");
                 SweepRow {
                     values,
@@ -189,11 +188,7 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                         }),
                     seconds: Some(rep.reconstruction_seconds),
                     refused: None,
-                    method: Some(
-                        dealiased
-                            .map_or("fourier", |r| r.stage.as_str())
-                            .to_string(),
-                    ),
+                    method: x.map(|r| r.stage.clone()),
                     calibration: Some(rep.calibration.source.clone()),
                 }
             }

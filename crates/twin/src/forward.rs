@@ -398,16 +398,15 @@ impl SceneStage {
     fn check_light(&self, light: &Cube) -> Result<()> {
         match light.data.iter().position(|v| !v.is_finite()) {
             None => Ok(()),
-            Some(p) => Err(Error::config(
-                &self.file,
-                "scene.source",
-                &self.cfg.source,
-                &format!(
-                    "the light on the camera overflows f32 at pixel ({}, {}): scale the scene's values down",
-                    p % light.width,
-                    p / light.width
-                ),
-            )),
+            Some(p) => {
+                let (_, x, y) = light.place(p);
+                Err(Error::config(
+                    &self.file,
+                    "scene.source",
+                    &self.cfg.source,
+                    &format!("the light on the camera overflows f32 at pixel ({x}, {y}): scale the scene's values down"),
+                ))
+            }
         }
     }
 }
