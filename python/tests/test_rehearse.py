@@ -67,7 +67,8 @@ def test_a_fault_is_reported_and_a_refused_plan_raises(moving):
     assert incident["kind"] == "dropped-frame" and incident["frame_ids"] == [ids[0] + 2]
     with pytest.raises(specmux.SpecmuxError) as e:
         specmux.rehearse(exp, faults=["no-such-fault@1"])
-    assert "no-such-fault" in str(e.value)
+    # The argument is named as Python spells it, not as the CLI does.
+    assert "no-such-fault" in str(e.value) and "`faults`" in str(e.value)
     dry = specmux.rehearse(exp, frames=10**7, dry_run=True)
     assert not dry["passes"] and "REFUSE" in dry["text"] and "frames" not in dry
     with pytest.raises(specmux.SpecmuxError):

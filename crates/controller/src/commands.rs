@@ -156,12 +156,13 @@ impl Sink for Rehearsal<'_> {
     }
 }
 
-/// Parse `--fault KIND@N` arguments for a plan of `frames` frames; a fault at an exposure the
-/// plan never reaches is refused (it would pass unnoticed).
-pub fn faults(specs: &[String], frames: usize) -> Result<Faults> {
+/// Parse `KIND@N` faults (given as `key`: `--fault`, or `faults` in Python) for a plan of
+/// `frames` frames; a fault at an exposure the plan never reaches is refused (it would pass
+/// unnoticed).
+pub fn faults(specs: &[String], frames: usize, key: &str) -> Result<Faults> {
     let faults: Vec<Fault> = specs
         .iter()
-        .map(|s| Fault::parse(s))
+        .map(|s| Fault::parse(s, key))
         .collect::<Result<_>>()?;
     if let Some((spec, f)) = specs
         .iter()
@@ -169,7 +170,7 @@ pub fn faults(specs: &[String], frames: usize) -> Result<Faults> {
         .find(|(_, f)| frames > 0 && f.exposure >= frames as u64)
     {
         return Err(Error::refused(
-            "--fault",
+            key,
             spec,
             format!(
                 "exposure {} is past the plan's {frames} frames (exposures 0 to {})",
@@ -190,7 +191,7 @@ pub fn rehearse(o: &RunOptions, lib: &Library) -> std::result::Result<String, St
 
 fn rehearse_in(o: &RunOptions, out: &Path, lib: &Library) -> Result<String> {
     let exp = experiment_of(o, out)?;
-    let faults = faults(&o.faults, o.frames)?;
+    let faults = faults(&o.faults, o.frames, "--fault")?;
     let (plan, text) = rehearsal_plan(&exp, o.frames, out);
     if o.dry_run {
         return Ok(dry_run(&plan, text));
@@ -385,7 +386,7 @@ fn acquire_in(
     lib: &Library,
 ) -> Result<String> {
     let (exp, frames, dry) = (experiment_of(o, out)?, o.frames, o.dry_run);
-    let faults = faults(&o.faults, o.frames)?;
+    let faults = faults(&o.faults, o.frames, "--fault")?;
     // The real rig is opened (inquiries only) even for a dry run: the plan needs its limits.
     let (real_devices, limits) = match backend {
         "sim" => (None, DeviceLimits::of_twin(&exp)),

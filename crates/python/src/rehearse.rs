@@ -41,7 +41,7 @@ pub fn rehearse<'py>(
     spectra: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let e = exp.inner.clone();
-    let faults = controller::faults(&faults.unwrap_or_default(), frames).map_err(err)?;
+    let faults = controller::faults(&faults.unwrap_or_default(), frames, "faults").map_err(err)?;
     let dir = OutDir::new(out, "rehearse");
     let (plan, text) = controller::rehearsal_plan(&e, frames, &dir.path);
     let d = PyDict::new(py);

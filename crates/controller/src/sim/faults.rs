@@ -34,9 +34,10 @@ pub struct Fault {
 }
 
 impl Fault {
-    /// Parse `KIND@N`, e.g. `missed-index@3`.
-    pub fn parse(text: &str) -> Result<Fault> {
-        let bad = |why: &str| Error::refused("--fault", text, why);
+    /// Parse `KIND@N`, e.g. `missed-index@3`; `key` names the argument in an error (`--fault`
+    /// on the command line, `faults` in Python).
+    pub fn parse(text: &str, key: &str) -> Result<Fault> {
+        let bad = |why: &str| Error::refused(key, text, why);
         let (kind, n) = text
             .split_once('@')
             .ok_or_else(|| bad("expected KIND@EXPOSURE, e.g. missed-index@3"))?;
@@ -83,15 +84,15 @@ mod tests {
     #[test]
     fn parses_and_refuses_with_the_key() {
         assert_eq!(
-            Fault::parse("dmd-underrun@7").unwrap(),
+            Fault::parse("dmd-underrun@7", "--fault").unwrap(),
             Fault {
                 kind: FaultKind::DmdUnderrun,
                 exposure: 7
             }
         );
         for bad in ["dmd-underrun", "melt@3", "missed-index@-1"] {
-            let msg = Fault::parse(bad).unwrap_err().to_string();
-            assert!(msg.contains("`--fault`") && msg.contains(bad), "{msg}");
+            let msg = Fault::parse(bad, "faults").unwrap_err().to_string();
+            assert!(msg.contains("`faults`") && msg.contains(bad), "{msg}");
         }
     }
 }
