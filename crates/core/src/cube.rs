@@ -95,6 +95,15 @@ impl Cube {
         self.width * self.height
     }
 
+    /// The size for a message, its axes named, since numpy users read (planes, height, width):
+    /// "256 wide × 128 high × 31 planes".
+    pub fn size_text(&self) -> String {
+        format!(
+            "{} wide × {} high × {} planes",
+            self.width, self.height, self.planes
+        )
+    }
+
     pub fn plane(&self, k: usize) -> &[f32] {
         let n = self.pixels();
         &self.data[k * n..(k + 1) * n]
@@ -131,8 +140,9 @@ impl Cube {
     pub fn check_same_shape(&self, other: &Cube, what: &str) -> Result<()> {
         if (self.width, self.height, self.planes) != (other.width, other.height, other.planes) {
             return Err(Error::Shape(format!(
-                "{what}: {}×{}×{} against {}×{}×{}",
-                self.width, self.height, self.planes, other.width, other.height, other.planes
+                "{what}: {} against {}",
+                self.size_text(),
+                other.size_text()
             )));
         }
         Ok(())

@@ -85,8 +85,8 @@ pub fn to_frame(a: &Bound<'_, PyAny>, what: &str, size: Option<(usize, usize)>) 
 pub fn check_frame(f: &Cube, what: &str, size: Option<(usize, usize)>) -> PyResult<()> {
     if let Some((w, h)) = size.filter(|&s| s != (f.width, f.height)) {
         return Err(err(format!(
-            "{what}: {}×{}, the frame is {w}×{h}",
-            f.width, f.height
+            "{what}: shape (height, width) ({}, {}), the frame's is ({h}, {w})",
+            f.height, f.width
         )));
     }
     match f.frame_problem(what) {

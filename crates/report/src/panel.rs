@@ -378,8 +378,9 @@ pub fn draw_field(
 pub fn pixel_rmse(truth: &Cube, est: &Cube) -> Result<Vec<f32>> {
     if (truth.width, truth.height, truth.planes) != (est.width, est.height, est.planes) {
         return Err(Error::Shape(format!(
-            "truth {}×{}×{} against reconstruction {}×{}×{}",
-            truth.width, truth.height, truth.planes, est.width, est.height, est.planes
+            "truth {} against reconstruction {}",
+            truth.size_text(),
+            est.size_text()
         )));
     }
     let n = truth.pixels();
