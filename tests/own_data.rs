@@ -553,6 +553,7 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
     check_schema("report.json", &report);
     for (stem, shape) in [
         ("cube", vec![31, 64, 64]),
+        ("truth", vec![31, 64, 64]),
         ("channels", vec![6, 64, 64]),
         ("frame", vec![64, 64]),
     ] {
@@ -571,6 +572,12 @@ fn npy_outputs_and_the_report_schema_from_an_installed_binary_in_an_empty_folder
         (s, data),
         (vec![64, 64], exr.data),
         "pattern-6.npy holds the EXR's samples"
+    );
+    // The demo's truth is the scene simulate renders for the same experiment.
+    assert_eq!(
+        read_npy(&work.join("sim/truth.npy")),
+        read_npy(&demo.join("truth.npy")),
+        "demo's truth.npy is not simulate's"
     );
     // reconstruct.json, from the same binary with a --spectra folder: its provenance says so.
     let lib = Path::new(env!("CARGO_MANIFEST_DIR")).join("spectra");

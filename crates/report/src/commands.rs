@@ -227,18 +227,23 @@ fn write_run_files(
     lib: &Library,
 ) -> Result<()> {
     let grid = exp.scene.grid(&exp.file)?;
-    // The cube (most of the bytes) beside the rest: an EXR is written on one thread.
-    let (cube, rest) = rayon::join(
-        || write_cube(files, "cube", &d.cube, &band_names(&grid), npy),
-        || -> Result<()> {
-            write_cube(files, "frame", &d.frame, &["Y".to_string()], npy)?;
-            specmux_io::png::plane_png(&files.path("frame.png"), &d.frame, 0)?;
-            let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
-            write_cube(files, "channels", &d.xhat, &ch, npy)?;
-            crate::panel::write_figures(exp, lib, Some(&d.truth), &d.cube, files)?;
-            specmux_io::json::write_json(&files.path("report.json"), rep)
-        },
-    );
+    let bands = band_names(&grid);
+    // The cube and the truth (most of the bytes) beside the rest: an EXR is written on one thread.
+    let cubes = || -> Result<()> {
+        let (cube, truth) = rayon::join(
+            || write_cube(files, "cube", &d.cube, &bands, npy),
+            || write_cube(files, "truth", &d.truth, &bands, npy),
+        );
+        cube.and(truth)
+    };
+    let (cube, rest) = rayon::join(cubes, || -> Result<()> {
+        write_cube(files, "frame", &d.frame, &["Y".to_string()], npy)?;
+        specmux_io::png::plane_png(&files.path("frame.png"), &d.frame, 0)?;
+        let ch: Vec<String> = (0..d.xhat.planes).map(|i| format!("x{i}")).collect();
+        write_cube(files, "channels", &d.xhat, &ch, npy)?;
+        crate::panel::write_figures(exp, lib, Some(&d.truth), &d.cube, files)?;
+        specmux_io::json::write_json(&files.path("report.json"), rep)
+    });
     cube.and(rest)
 }
 
@@ -881,8 +886,10 @@ fn read_truth(path: &Path, frame: &specmux_core::Cube, bands: usize) -> Result<s
         return Err(Error::Exr {
             path: path.to_path_buf(),
             msg: format!(
-                "a {}×{}×{} truth for a {}×{} frame and {bands} bands (scene.wavelengths_nm)",
-                cube.width, cube.height, cube.planes, frame.width, frame.height
+                "a truth {} for a frame {} wide × {} high and {bands} bands (scene.wavelengths_nm)",
+                cube.size_text(),
+                frame.width,
+                frame.height
             ),
         });
     }
