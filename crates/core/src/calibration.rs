@@ -60,7 +60,8 @@ pub struct MeasuredCarrier {
     pub carrier: Carrier,
     /// Complex amplitude of that term in the white-target capture (frame units).
     pub amplitude: [f64; 2],
-    /// Mean of the white-target capture: the white level of this pattern's slot.
+    /// Mean of the white-target capture under the Hann taper `amplitude` is measured with: the
+    /// white level of this pattern's slot where its carrier is measured.
     pub white_level: f64,
     /// Shift from the design carrier, in cycles/px.
     pub shift: [f64; 2],
@@ -239,7 +240,6 @@ fn measure_carrier(
 ) -> Result<MeasuredCarrier> {
     let (w, h) = (patterns.width, patterns.height);
     let plane = patterns.plane(k);
-    let white_level = plane.iter().map(|&v| v as f64).sum::<f64>() / plane.len() as f64;
     let spec = fft.forward(plane);
     let (bx, by) = (Carrier::bin(design.fx, w), Carrier::bin(design.fy, h));
     let r = radius_bins as i64;
@@ -260,6 +260,10 @@ fn measure_carrier(
     // A Hann taper keeps the DC term and the mirror carrier from leaking into the estimate of
     // an off-grid tone; on the grid its transform is zero two bins away, so nothing changes.
     let tapered = hann(plane, w, h);
+    // The white level under the same taper as the amplitude, so that their ratio is the
+    // modulation depth where the amplitude is measured: a plain mean counts the dim border of an
+    // imaged DMD that the taper leaves out (it read the full rig's gains 5–7 % high).
+    let white_level = tapered.iter().map(|&v| v as f64).sum::<f64>() / plane.len() as f64 * 4.0;
     let (fx, fy) = if off_grid(&spec, best.0, best.1) {
         refine_peak(&tapered, w, h, fx0, fy0)
     } else {
@@ -517,6 +521,38 @@ mod tests {
         );
         let scaled = measure(true, 1000.0).carriers[0].prominence.unwrap();
         assert!((scaled / p - 1.0).abs() < 1e-3, "{scaled} against {p}");
+    }
+
+    /// By hand: the capture 1 + ½cos(2π·¼x) inside a 32 × 32 square, dark outside it (an imaged
+    /// DMD's border), on a 64 × 64 frame. Wherever there is light the e^{iω·x} term is ¼ of the
+    /// white level, so |a| / white = ¼ under one taper for both, up to the taper's leak of the
+    /// lit square's DC into the carrier's bin (0.75 %, numpy). Over the plain mean it read 0.66.
+    #[test]
+    fn the_white_level_is_measured_where_the_amplitude_is() {
+        let plane = (0..64 * 64)
+            .map(|i| {
+                let (x, y) = (i % 64, i / 64);
+                let lit = (16..48).contains(&x) && (16..48).contains(&y);
+                let tone = 0.5 * (std::f32::consts::TAU * 0.25 * x as f32).cos();
+                if lit {
+                    1.0 + tone
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let patterns = Cube::from_vec(64, 64, 1, plane).unwrap();
+        let frames = CalibrationFrames::single(None, None, patterns, "test".into());
+        let design = [Carrier {
+            fx: 0.25,
+            fy: 0.0,
+            phase_rad: 0.0,
+        }];
+        let m = Calibration::from_frames(&design, &frames, 4)
+            .unwrap()
+            .carriers[0];
+        let depth = m.amplitude().norm() / m.white_level;
+        assert!((depth / 0.25 - 1.0).abs() < 0.01, "{depth}");
     }
 
     #[test]
