@@ -8,7 +8,7 @@
 use serde::Serialize;
 use specmux_core::spectral::Library;
 use specmux_core::{Error, Result};
-use specmux_twin::run;
+use specmux_twin::run::{self, Row};
 use specmux_twin::Experiment;
 use std::path::{Path, PathBuf};
 
@@ -93,11 +93,7 @@ pub struct Outcome {
 pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Outcome> {
     exp.validate()?;
     let (rep, _) = run::run(exp, lib)?;
-    let cube = rep
-        .results
-        .iter()
-        .find(|r| r.stage == "unmix")
-        .ok_or_else(|| Error::Numerical("the run report has no unmix row".into()))?;
+    let cube = rep.row(Row::Cube);
     let leak_db = rep.error_budget.as_ref().map(|b| {
         b.iter()
             .map(|e| {

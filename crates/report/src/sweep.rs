@@ -10,7 +10,7 @@ use specmux_core::error::Result;
 use specmux_core::spectral::Library;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::pattern_cache::PatternCache;
-use specmux_twin::run;
+use specmux_twin::run::{self, Row};
 
 /// One swept key and its values (TOML literals).
 #[derive(Clone, Debug)]
@@ -167,17 +167,13 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
         let row = match run::run_in(&exp, lib, Some(&cache)) {
             Err(e @ Error::Interrupted(_)) => return Err(e),
             Ok((rep, _)) => {
-                let find = |stage: &str| rep.results.iter().find(|r| r.stage.starts_with(stage));
-                // The de-aliased channels' row (every method has one), after demultiplexing's.
-                let x = (rep.results.iter())
-                    .find(|r| r.against.starts_with("x (true") && r.stage != "demultiplex");
-                let cube = find("unmix");
+                let (x, cube) = (rep.row(Row::Dealiased), rep.row(Row::Cube));
                 SweepRow {
                     values,
-                    channels_psnr_db: x.map(|r| r.psnr_db),
-                    cube_psnr_db: cube.map(|r| r.psnr_db),
-                    cube_ssim: cube.map(|r| r.ssim),
-                    cube_sam_deg: cube.and_then(|r| r.sam_deg),
+                    channels_psnr_db: Some(x.psnr_db),
+                    cube_psnr_db: Some(cube.psnr_db),
+                    cube_ssim: Some(cube.ssim),
+                    cube_sam_deg: cube.sam_deg,
                     carrier_gain: rep
                         .channels
                         .iter()
@@ -188,7 +184,7 @@ pub fn sweep(base: &Experiment, vary: &[Vary], lib: &Library) -> Result<Vec<Swee
                         }),
                     seconds: Some(rep.reconstruction_seconds),
                     refused: None,
-                    method: x.map(|r| r.stage.clone()),
+                    method: Some(x.stage.clone()),
                     calibration: Some(rep.calibration.source.clone()),
                 }
             }

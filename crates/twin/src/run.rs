@@ -21,6 +21,22 @@ use specmux_core::unmix::UnmixStats;
 use specmux_core::{Cube, Error, Result};
 use std::time::Instant;
 
+/// The rows of [`RunReport::results`], in their order: what each measures, for code that reads
+/// one (the printed wording is for people).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Row {
+    /// x̂ against the true channels.
+    Demultiplexed,
+    /// The de-aliased channels (GAP, GAP-TV, the joint method's Fα; x̂ again for Fourier).
+    Dealiased,
+    /// Each channel through its crop window alone.
+    CropBound,
+    /// The final cube against the true cube.
+    Cube,
+    /// The true channels unmixed: the spectral limit.
+    SpectralLimit,
+}
+
 /// One row of the result table: an estimate against its truth, and what it cost.
 #[derive(Clone, Debug, Serialize)]
 pub struct ResultRow {
@@ -425,6 +441,7 @@ fn result_rows(
             exp.reconstruct.gap.method, out.gap.iterations
         ),
     };
+    // In the order of `Row`.
     let rows = vec![
         row("demultiplex", "x (true channels)", &m_x, t_demux),
         row(&gap, "x (true channels)", &m_gap, t_gap),
@@ -487,6 +504,11 @@ fn error_budget(exp: &Experiment, rig: &Rig, channels: &Cube) -> Result<Option<V
 }
 
 impl RunReport {
+    /// One row of the result table, by what it measures.
+    pub fn row(&self, which: Row) -> &ResultRow {
+        &self.results[which as usize]
+    }
+
     /// The result table as fixed-width text.
     pub fn table(&self) -> String {
         // An oracle's figures say so before any of them (and not again among the warnings).
