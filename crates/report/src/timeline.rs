@@ -74,6 +74,8 @@ fn draw_panel(
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 22))
         .margin(12)
+        // Room for the last tick's label, which is centred on the right edge.
+        .margin_right(28)
         .x_label_area_size(40)
         .y_label_area_size(10)
         .build_cartesian_2d(a * ms..b * ms, 0.0..3.4)?;
@@ -228,6 +230,7 @@ fn draw_lanes(
     let mut chart = ChartBuilder::on(area)
         .caption(title, ("sans-serif", 20))
         .margin(10)
+        .margin_right(32)
         .x_label_area_size(36)
         .y_label_area_size(230)
         .build_cartesian_2d(a * ms..b * ms, -0.5..n - 0.5)?;

@@ -561,8 +561,7 @@ mod properties {
     }
 }
 
-/// The matrices quoted in docs/timing.md. Run with `-- --nocapture` to print them; with
-/// SPECMUX_DOC_OUT=<dir> it also writes <dir>/timing_timeline.png (the last case).
+/// The matrices quoted in docs/timing.md. Run with `-- --nocapture` to print them.
 #[test]
 fn doc_examples() {
     let proto = TimingConfig::default();
