@@ -496,7 +496,8 @@ fn host_checks(p: &Plan) -> Vec<Check> {
     ]
 }
 
-/// One phase of the expected timeline.
+/// One phase of the expected timeline: the longest it takes (a capture's first trigger may come
+/// up to one frame period after arming).
 #[derive(Clone, Debug, Serialize)]
 pub struct Phase {
     pub what: String,
@@ -571,7 +572,9 @@ impl Plan {
     /// The timeline and the trigger chain as text.
     pub fn timeline_text(&self) -> String {
         let s = &self.settings;
-        let mut t = String::from("expected timeline (virtual seconds):\n");
+        let mut t = String::from(
+            "expected timeline (virtual seconds; each capture allows one frame period for its first trigger, so a run ends up to that much sooner):\n",
+        );
         let phases = self.timeline();
         for p in &phases {
             t += &format!(
