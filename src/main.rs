@@ -180,37 +180,32 @@ fn dispatch(cmd: Command, lib: &Library) -> std::result::Result<String, String> 
             out,
         } => commands::ptc(experiment.as_deref(), size, emva, &out, lib),
         Command::Design { what } => what.run(lib),
-        // A folder is a recording (`specmux acquire`/`rehearse`): its own experiment,
-        // calibration and truths are used.
         Command::Reconstruct {
             frame,
-            out,
             experiment,
             calibration,
             truth,
+            out,
             npy,
-        } if frame.is_dir() => {
-            if experiment.is_some() || calibration.is_some() || truth.is_some() || npy {
-                return Err(format!("{}: a recording brings its own experiment, calibration and truths; --experiment, --calibration, --truth and --npy are for one frame", frame.display()));
+        } => {
+            // A folder is a recording (`specmux acquire`/`rehearse`): its own experiment,
+            // calibration and truths are used.
+            if frame.is_dir() {
+                if experiment.is_some() || calibration.is_some() || truth.is_some() || npy {
+                    return Err(format!("{}: a recording brings its own experiment, calibration and truths; --experiment, --calibration, --truth and --npy are for one frame", frame.display()));
+                }
+                return specmux_controller::reconstruct::reconstruct_recording(&frame, &out, lib);
             }
-            return specmux_controller::reconstruct::reconstruct_recording(&frame, &out, lib);
+            commands::reconstruct(
+                &frame,
+                experiment.as_deref(),
+                calibration.as_deref(),
+                truth.as_deref(),
+                &out,
+                npy,
+                lib,
+            )
         }
-        Command::Reconstruct {
-            frame,
-            experiment,
-            calibration,
-            truth,
-            out,
-            npy,
-        } => commands::reconstruct(
-            &frame,
-            experiment.as_deref(),
-            calibration.as_deref(),
-            truth.as_deref(),
-            &out,
-            npy,
-            lib,
-        ),
         Command::Rehearse(a) => return controller::rehearse(&a.into(), lib),
         Command::Acquire { run, backend, real } => {
             return controller::acquire(&backend, &run.into(), &real, lib)
