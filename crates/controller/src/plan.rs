@@ -4,6 +4,7 @@
 //! sent a command; a failed check refuses the plan in one line that names the key and value.
 
 use crate::error::{Error, Result};
+use crate::patterns::PictureOptics;
 use serde::Serialize;
 use specmux_core::Carrier;
 use specmux_twin::timing::TimingConfig;
@@ -42,13 +43,15 @@ const CAMERA_EXPOSURE_RANGE_S: (f64, f64) = (10e-6, 8.0);
 
 impl DeviceLimits {
     /// The simulated devices of an experiment: the DMD's rate and the camera's frame rate and
-    /// read-out from `[rig.timing]` (or its defaults), sizes from the scene.
+    /// read-out from `[rig.timing]` (or its defaults); the camera the scene's size, the DMD the
+    /// mirrors of `[rig.dmd]` (without one, a DMD imaged pixel for pixel).
     pub fn of_twin(exp: &Experiment) -> DeviceLimits {
         let t = timing_of(exp);
         let [w, h] = exp.scene.size;
+        let (dw, dh) = exp.rig.dmd.as_ref().map_or((w, h), |d| (d.width, d.height));
         DeviceLimits {
-            dmd_width: w,
-            dmd_height: h,
+            dmd_width: dw,
+            dmd_height: dh,
             dmd_min_picture_s: 1.0 / t.dmd.max_rate_hz,
             dmd_max_pictures: SIM_DMD_PICTURES,
             camera_width: w,
@@ -222,6 +225,8 @@ pub struct Plan {
     pub memory_bytes: u64,
     /// The design carriers, in segment order: what the DMD's pictures are made from.
     pub carriers: Vec<Carrier>,
+    /// How the camera sees the DMD, which lays the pictures out.
+    pub optics: PictureOptics,
 }
 
 /// Frames the plan accepts at most (a 24 fps day).
@@ -266,12 +271,13 @@ impl Plan {
         steps.push(Step::Stop);
         let pictures = (n + 3) * n;
         let pixels = (settings.width * settings.height) as u64;
+        let mirrors = (dev.dmd_width * dev.dmd_height) as u64;
         let disk_bytes = frames as u64 * (settings.frame_bytes + METADATA_BYTES_PER_FRAME)
             + (n as u64 + 2) * pixels * 4
             + (1 << 20);
         let memory_bytes = dev.camera_buffers as u64 * settings.frame_bytes
             + pixels * 8 * 2
-            + pictures as u64 * pixels.div_ceil(8);
+            + pictures as u64 * mirrors.div_ceil(8);
         let mut plan = Plan {
             experiment: exp.file.clone(),
             settings,
@@ -282,6 +288,7 @@ impl Plan {
             disk_bytes,
             memory_bytes,
             carriers: exp.carriers().map(|(c, _)| c).unwrap_or_default(),
+            optics: PictureOptics::of(exp, dev.dmd_width, dev.dmd_height),
         };
         plan.checks = checks(exp, &plan);
         plan
@@ -351,6 +358,22 @@ fn check(key: &str, value: impl std::fmt::Display, ok: bool, note: String) -> Ch
     }
 }
 
+/// The camera's field on the DMD (its pixels over the lens's pixels per mirror) within the mirrors.
+fn field_check(p: &Plan) -> Check {
+    let (s, d) = (&p.settings, &p.devices);
+    let per_mirror = p.optics.pixels_per_mirror();
+    let (fw, fh) = (s.width as f64 / per_mirror, s.height as f64 / per_mirror);
+    check(
+        "scene.size",
+        format!("[{}, {}]", s.width, s.height),
+        fw <= d.dmd_width as f64 + 1e-9 && fh <= d.dmd_height as f64 + 1e-9,
+        format!(
+            "the camera sees {fw:.1} × {fh:.1} mirrors ({per_mirror:.4} pixels per mirror); the DMD has {} × {}",
+            d.dmd_width, d.dmd_height
+        ),
+    )
+}
+
 /// Every check, in the order a person would fix them: the DMD, the camera, the wheel, the host.
 fn checks(exp: &Experiment, plan: &Plan) -> Vec<Check> {
     let mut c = dmd_checks(exp, plan);
@@ -400,12 +423,7 @@ fn dmd_checks(exp: &Experiment, p: &Plan) -> Vec<Check> {
                 d.dmd_min_picture_s * 1e6
             ),
         ),
-        check(
-            "scene.size",
-            format!("[{}, {}]", s.width, s.height),
-            s.width <= d.dmd_width && s.height <= d.dmd_height,
-            format!("the DMD has {} × {} mirrors", d.dmd_width, d.dmd_height),
-        ),
+        field_check(p),
         check(
             "rig.wheel.filters",
             s.segments,

@@ -187,13 +187,15 @@ impl Session<'_> {
             synch_pulse_width_s: s.picture_s / 2.0,
             trigger_in_delay_s: s.trigger_in_delay_s,
         };
-        let pics = patterns::carrier_pictures(&self.plan.carriers, s.width, s.height);
+        let optics = &self.plan.optics;
+        let pics = patterns::carrier_pictures(&self.plan.carriers, optics, s.width, s.height)?;
+        let (dw, dh) = (optics.dmd.width, optics.dmd.height);
         let mut seqs = Vec::new();
         for capture in calibration_captures(s.segments)
             .into_iter()
             .chain([Capture::Scene])
         {
-            let pictures = sequence_pictures(capture, &pics, s.width, s.height);
+            let pictures = sequence_pictures(capture, &pics, dw, dh);
             let id = self.dev.dmd.seq_alloc(1, pictures.len())?;
             self.dev.dmd.seq_put(id, 0, &pictures)?;
             self.dev.dmd.seq_timing(id, &timing)?;

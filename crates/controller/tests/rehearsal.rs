@@ -14,6 +14,8 @@ use specmux_core::calibration::Calibration;
 use specmux_core::metrics;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::Cube;
+use specmux_twin::optics::dither::DitherMethod;
+use specmux_twin::optics::dmd::DmdConfig;
 
 #[test]
 fn a_clean_run_labels_every_frame_and_reconstructs_like_the_twin() {
@@ -68,11 +70,46 @@ fn a_clean_run_labels_every_frame_and_reconstructs_like_the_twin() {
     );
 }
 
+/// A DMD larger than the camera's field (80 × 72 mirrors, one a pixel, for 64 × 64 pixels): a DMD
+/// takes whole pictures, so the controller uploads 80 × 72 ones, which the simulated DMD (which
+/// refuses any other size) takes, and the captures measure every carrier.
+#[test]
+fn the_pictures_cover_the_whole_dmd() {
+    let mut exp = experiment("");
+    exp.rig.dmd = Some(DmdConfig {
+        width: 80,
+        height: 72,
+        dither: DitherMethod::Threshold,
+        ..DmdConfig::default()
+    });
+    let p = plan(&exp, 2);
+    assert_eq!((p.optics.dmd.width, p.optics.dmd.height), (80, 72));
+    let (sim, rig) = rig(&exp, &[]);
+    let mut keep = Keep::default();
+    let out = run(&p, &mut sim.devices(), &mut keep).unwrap();
+    assert!(
+        out.completed && keep.frames.len() == 2,
+        "{:?}",
+        out.incidents
+    );
+    let cal = Calibration::from_frames(
+        &rig.carriers,
+        keep.calibration.as_ref().unwrap(),
+        exp.calibration.search_bins,
+    )
+    .unwrap();
+    assert_eq!(cal.warning(), None);
+}
+
 #[test]
 fn infeasible_plans_are_refused_before_any_device_command() {
     let exp = experiment("");
     let slow_dmd = DeviceLimits {
         dmd_min_picture_s: 200e-6,
+        ..DeviceLimits::of_twin(&exp)
+    };
+    let narrow_dmd = DeviceLimits {
+        dmd_width: 60,
         ..DeviceLimits::of_twin(&exp)
     };
     let small_disk = HostLimits {
@@ -99,6 +136,11 @@ fn infeasible_plans_are_refused_before_any_device_command() {
             "MB are free",
         ),
         (plan(&exp, 0), "`--frames` = 0", "1 to"),
+        (
+            Plan::new(&exp, 4, &narrow_dmd, &roomy()),
+            "`scene.size` = [64, 64]",
+            "the camera sees 64.0 × 64.0 mirrors (1.0000 pixels per mirror); the DMD has 60 × 64",
+        ),
     ];
     for (p, key, why) in cases {
         let (sim, _) = rig(&exp, &[]);

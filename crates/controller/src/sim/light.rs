@@ -7,8 +7,8 @@
 
 use crate::devices::{BitPlane, Target};
 use crate::error::Result;
-use crate::patterns;
-use crate::plan::timing_of;
+use crate::patterns::{self, PictureOptics};
+use crate::plan::{timing_of, DeviceLimits};
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_twin::forward::Pipeline;
@@ -92,21 +92,19 @@ impl Light {
             .row_iter()
             .map(|r| r.iter().cloned().collect())
             .collect();
+        // The pictures the controller uploads (plan.rs), each to what the twin images it as.
+        let limits = DeviceLimits::of_twin(exp);
+        let optics = PictureOptics::of(exp, limits.dmd_width, limits.dmd_height);
         let mut pictures = HashMap::new();
-        for (k, p) in patterns::carrier_pictures(&rig.carriers, rig.width, rig.height)
+        for (k, p) in patterns::carrier_pictures(&rig.carriers, &optics, rig.width, rig.height)?
             .into_iter()
             .enumerate()
         {
             pictures.entry(p).or_insert(Picture::Pattern(k));
         }
-        pictures.insert(
-            BitPlane::uniform(rig.width, rig.height, false),
-            Picture::Dark,
-        );
-        pictures.insert(
-            BitPlane::uniform(rig.width, rig.height, true),
-            Picture::Bright,
-        );
+        let (dw, dh) = (optics.dmd.width, optics.dmd.height);
+        pictures.insert(BitPlane::uniform(dw, dh, false), Picture::Dark);
+        pictures.insert(BitPlane::uniform(dw, dh, true), Picture::Bright);
         let still = (!exp.scene.moves()).then(|| (sim.scene.cube.clone(), sim.channels.clone()));
         let light = Light {
             exp: exp.clone(),

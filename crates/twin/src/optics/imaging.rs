@@ -545,6 +545,19 @@ pub struct Display {
     geometry: Geometry,
 }
 
+/// The grey target s/2 of carrier `c` on the mirrors of `m`, as a `w × h` sensor sees them through
+/// `lens` (none: one pixel per mirror, upright): what a controller dithers into the DMD's picture.
+/// Refuses a DMD that does not cover the sensor, or a carrier past the mirrors' Nyquist limit.
+pub fn mirror_target(
+    lens: Option<&LensConfig>,
+    m: &DmdConfig,
+    c: &Carrier,
+    w: usize,
+    h: usize,
+) -> Result<Vec<f32>> {
+    Ok(grey_target(m, &geometry(lens, m, c, w, h)?, c))
+}
+
 /// The grey target s_i/2 on the mirrors, phase referenced to the sensor grid.
 fn grey_target(m: &DmdConfig, g: &Geometry, c: &Carrier) -> Vec<f32> {
     let (wd, hd) = (m.width, m.height);
