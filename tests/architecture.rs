@@ -71,14 +71,14 @@ const LAYERS: &[(&str, &[&[&str]])] = &[
     ),
     (
         "controller",
-        // The devices and the plan, then the simulated and real devices that follow them, the
-        // run that drives them, its recording, and the commands.
+        // The devices, the pictures the DMD is given and the plan, then the simulated and real
+        // devices that follow them, the run that drives them, its recording, and the commands.
         &[
             &["error"],
             &["log"],
             &["devices"],
-            &["plan"],
             &["patterns"],
+            &["plan"],
             &["ome"],
             &["real"],
             &["sim"],
