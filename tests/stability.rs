@@ -776,7 +776,9 @@ fn cli_a_truth_of_the_wrong_size_is_refused_before_anything_is_written() {
     ]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        !out.status.success() && err.contains("truth.exr") && err.contains("32×32×31"),
+        !out.status.success()
+            && err.contains("truth.exr")
+            && err.contains("32 wide × 32 high × 31 planes"),
         "{err}"
     );
     assert!(!d.join("out").exists(), "nothing may be written");

@@ -544,7 +544,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("estimate against truth: 4×2×1 against 4×4×1"),
+            e.contains("estimate against truth: 4 wide × 2 high × 1 planes against 4 wide × 4 high × 1 planes"),
             "{e}"
         );
         let m = compare(&t, &t).unwrap();
