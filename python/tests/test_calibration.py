@@ -105,7 +105,7 @@ def test_measured_frames_of_a_misaligned_rig_find_its_carriers():
 @pytest.mark.parametrize(
     "change, words",
     [
-        (lambda c: dict(c, flat=c["flat"][:32, :32]), ['calibration["flat"]', "32×32", "64×64"]),
+        (lambda c: dict(c, flat=c["flat"][:32, :32]), ['calibration["flat"]', "(32, 32)", "(64, 64)"]),
         (lambda c: dict(c, patterns=np.where(np.arange(6)[:, None, None] == 2, np.nan, c["patterns"])),
          ['calibration["patterns"][2]', "pixel (0, 0)", "NaN", "finite"]),
         (lambda c: dict(c, dark=c["dark"] * np.float32(1e-40)), ['calibration["dark"]', "under 1e-30"]),
