@@ -39,17 +39,14 @@ pub struct CarrierArgs {
     /// Window shape(s) tried for the designed layouts: square, circular, super-gaussian.
     #[arg(long, value_delimiter = ',', default_value = "square")]
     pub window: Vec<String>,
-    /// Number of carriers (default: one per filter of the experiment's wheel).
-    #[arg(long)]
-    pub carriers: Option<usize>,
     /// Experiment files whose scenes the layout is designed on; default: every file in `--scenes-dir`.
-    #[arg(long)]
+    #[arg(long, num_args = 1..)]
     pub scenes: Vec<PathBuf>,
     /// The folder of experiment files `--scenes` defaults to.
     #[arg(long, default_value = "scenes")]
     pub scenes_dir: PathBuf,
     /// The user's cubes (EXR, or experiment files): design on these alone (scene-adaptive).
-    #[arg(long)]
+    #[arg(long, num_args = 1..)]
     pub cube: Vec<PathBuf>,
     /// Spurious terms kept out of every window.
     #[arg(long, value_enum, default_value = "harmonics")]
@@ -210,7 +207,7 @@ fn parse_window(s: &str) -> Result<WindowShape> {
 }
 
 /// Check the arguments; the error names the option and the value.
-fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
+fn check_args(a: &CarrierArgs) -> Result<()> {
     check_count("--size", "size", a.size, 16..=4096, "pixels")?;
     if let Some(c) = a.crop.iter().find(|c| !(**c > 0.0 && **c <= 0.5)) {
         return Err(Error::config("--crop", "crop", c, "must be in (0, 0.5]"));
@@ -230,8 +227,7 @@ fn check_args(a: &CarrierArgs, j: usize) -> Result<()> {
         a.candidates,
         1..=100,
         per_crop,
-    )?;
-    check_count("--carriers", "carriers", j, 1..=16, "carriers")
+    )
 }
 
 /// Predicted scores of a layout as a candidate (simulations filled in later).
@@ -378,10 +374,9 @@ fn choose(cands: &[Candidate]) -> usize {
 pub fn design(a: &CarrierArgs, lib: &Library) -> Result<CarrierDesign> {
     let t0 = Instant::now();
     let base = crate::filters::base_experiment(a.experiment.as_deref())?;
-    let j = a.carriers.unwrap_or(base.rig.wheel.filters.len());
-    check_args(a, j)?;
-    let mut base = base;
-    base.rig.wheel.filters.truncate(j);
+    // One carrier per wheel filter.
+    let j = base.rig.wheel.filters.len();
+    check_args(a)?;
     let scenes = design_scenes(a, &base)?;
     let (spectra, weights) = measure(&scenes, &base, a.size, lib)?;
     let t_measure = t0.elapsed().as_secs_f64();

@@ -9,6 +9,7 @@ use crate::search::{self, Ranked};
 use crate::{plot, scenes};
 use serde::Serialize;
 use specmux_core::error::check_count;
+use specmux_core::interrupt;
 use specmux_core::spectral::Library;
 use specmux_core::{Error, Result};
 use specmux_report::progress;
@@ -47,7 +48,7 @@ pub struct FilterArgs {
     #[arg(long, default_value_t = 2)]
     pub simulate: usize,
     /// Experiment files whose scenes score the sets; default: every file in `--scenes-dir`.
-    #[arg(long)]
+    #[arg(long, num_args = 1..)]
     pub scenes: Vec<PathBuf>,
     /// The folder of experiment files `--scenes` defaults to.
     #[arg(long, default_value = "scenes")]
@@ -124,6 +125,12 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
         );
         return Err(Error::config("--choose", "choose", a.choose, &why));
     }
+    // Before the search: a set of another size has no carrier layout to run on.
+    let carriers = base.carrier_count();
+    if a.choose != carriers {
+        let why = format!("one filter per carrier: the experiment ({}) has {carriers} carriers (rig.carriers.frequencies)", base.file);
+        return Err(Error::config("--choose", "choose", a.choose, &why));
+    }
     let keep = a
         .keep
         .iter()
@@ -193,10 +200,11 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     let t_setup = t0.elapsed().as_secs_f64();
     let t = Instant::now();
     let paper = search::minimax_correlation(&s.ev, a.choose, &s.keep, a.top);
+    interrupt::check("the filter search")?;
     let t_bnb = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let bar = progress::bar("scoring every combination");
-    let ranked = search::exhaustive(&s.ev, a.choose, &s.keep, a.top, &bar);
+    let ranked = search::exhaustive(&s.ev, a.choose, &s.keep, a.top, &bar)?;
     bar.finish_and_clear();
     let t_all = t.elapsed().as_secs_f64();
     let combos = search::binomial(
@@ -217,7 +225,7 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
             format!(", keeping {}", a.keep.join(", "))
         }
     );
-    let _ = writeln!(text, "exact search: branch and bound on the paper's criterion {t_bnb:.3} s; every combination scored on all criteria {t_all:.2} s (2 cores)\n");
+    let _ = writeln!(text, "exact search: branch and bound on the paper's criterion {t_bnb:.3} s; every combination scored on all criteria {t_all:.2} s ({} threads)\n", rayon::current_num_threads());
     text += &rank_table(&s, &paper.items, &ranked);
     let t = Instant::now();
     let sims = simulate_sets(a, &base, &scenes, &s, (&paper.items, &ranked[4].items), lib)?;

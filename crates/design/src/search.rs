@@ -14,6 +14,8 @@
 use crate::criteria::{Evaluator, Scores, CRITERIA};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
+use specmux_core::error::Result;
+use specmux_core::interrupt;
 
 /// A set and its value under one criterion.
 #[derive(Clone, Debug, PartialEq)]
@@ -117,6 +119,10 @@ fn branch(
         return;
     }
     for p in from..=free.len() - need {
+        // Ctrl-C: the caller reports the stop (`interrupt::check`); what is found is dropped.
+        if interrupt::requested() {
+            return;
+        }
         let c = free[p];
         let worst = set.iter().map(|&s| ev.corr(s, c)).fold(partial, f64::max);
         // Equal values still enter on the lexicographic tie-break, so prune only above.
@@ -137,14 +143,15 @@ pub fn binomial(n: usize, k: usize) -> u64 {
     (0..k.min(n - k)).fold(1u64, |acc, i| acc * (n - i) as u64 / (i + 1) as u64)
 }
 
-/// Score every combination; the best `top` of each criterion (in [`CRITERIA`] order).
+/// Score every combination; the best `top` of each criterion (in [`CRITERIA`] order). Ctrl-C
+/// stops it within a few thousand sets per thread, as an error.
 pub fn exhaustive(
     ev: &Evaluator,
     choose: usize,
     keep: &[usize],
     top: usize,
     bar: &ProgressBar,
-) -> Vec<TopK> {
+) -> Result<Vec<TopK>> {
     let (free, need) = split(ev.len(), choose, keep);
     let empty = || vec![TopK::new(top); CRITERIA.len()];
     if need == 0 || need > free.len() {
@@ -154,10 +161,10 @@ pub fn exhaustive(
             set.sort_unstable();
             record(&mut t, &ev.score(&set), &set);
         }
-        return t;
+        return Ok(t);
     }
     bar.set_length(binomial(free.len(), need));
-    (0..=free.len() - need)
+    let ranked = (0..=free.len() - need)
         .into_par_iter()
         .map(|first| {
             let mut t = empty();
@@ -169,13 +176,16 @@ pub fn exhaustive(
                 sorted.sort_unstable();
                 record(&mut t, &ev.score(&sorted), &sorted);
                 count += 1;
+                count % 4096 != 0 || !interrupt::requested()
             });
             bar.inc(count);
             t
         })
         .reduce(empty, |a, b| {
             a.into_iter().zip(b).map(|(x, y)| x.merge(y)).collect()
-        })
+        });
+    interrupt::check("the filter search")?;
+    Ok(ranked)
 }
 
 fn record(t: &mut [TopK], s: &Scores, set: &[usize]) {
@@ -187,17 +197,26 @@ fn record(t: &mut [TopK], s: &Scores, set: &[usize]) {
     }
 }
 
-/// Call `f` on `set` extended by every `need`-subset of `pool` (in lexicographic order).
-pub fn each(pool: &[usize], need: usize, set: &mut Vec<usize>, f: &mut impl FnMut(&[usize])) {
+/// Call `f` on `set` extended by every `need`-subset of `pool` (in lexicographic order), until
+/// `f` returns false; false when it did.
+pub fn each(
+    pool: &[usize],
+    need: usize,
+    set: &mut Vec<usize>,
+    f: &mut impl FnMut(&[usize]) -> bool,
+) -> bool {
     if need == 0 {
-        f(set);
-        return;
+        return f(set);
     }
     for p in 0..pool.len().saturating_sub(need - 1) {
         set.push(pool[p]);
-        each(&pool[p + 1..], need - 1, set, f);
+        let go_on = each(&pool[p + 1..], need - 1, set, f);
         set.pop();
+        if !go_on {
+            return false;
+        }
     }
+    true
 }
 
 #[cfg(test)]
@@ -221,6 +240,7 @@ mod tests {
                 value: value(&set),
                 set,
             });
+            true
         });
         all.retain(|r| r.value.is_finite());
         all.sort_by(|a, b| a.value.total_cmp(&b.value).then_with(|| a.set.cmp(&b.set)));
@@ -244,7 +264,7 @@ mod tests {
     #[test]
     fn exhaustive_top_lists_agree_with_brute_force_for_every_criterion() {
         let (ev, _) = evaluator(6);
-        let got = exhaustive(&ev, 6, &[3], 5, &ProgressBar::hidden());
+        let got = exhaustive(&ev, 6, &[3], 5, &ProgressBar::hidden()).unwrap();
         for (k, top) in got.iter().enumerate() {
             let want = brute(&ev, 6, &[3], |s| ev.score(s).get(k));
             assert_eq!(top.items, want[..5].to_vec(), "{}", CRITERIA[k]);

@@ -146,7 +146,7 @@ fn finish(
 }
 
 /// Lay out the carriers: `specmux design carriers` with its options as keyword arguments
-/// (`size`, `crop` (a list lets the design choose), `window`, `carriers`, `scenes`,
+/// (`size`, `crop` (a list lets the design choose), `window`, `scenes`,
 /// `scenes_dir`, `cube`, `guard`, `harmonic`, `restarts`, `candidates`, `coherent`,
 /// `experiment`, `seed`; paths as on the command line). `out`: keep the files there (default: a
 /// temporary folder, removed).

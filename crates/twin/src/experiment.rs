@@ -181,6 +181,11 @@ impl Experiment {
         }
     }
 
+    /// How many carriers the rig has: `rig.carriers.frequencies`, else the default layout's 6.
+    pub fn carrier_count(&self) -> usize {
+        (self.rig.carriers.frequencies.as_ref()).map_or(carriers::default_layout().len(), Vec::len)
+    }
+
     /// The design carriers on the frame's FFT bin grid, and a note per default carrier snapped.
     pub fn carriers(&self) -> Result<(Vec<Carrier>, Vec<String>)> {
         let [w, h] = self.scene.size;
