@@ -8,6 +8,7 @@ use specmux_controller::commands as controller;
 use specmux_core::spectral::Library;
 use specmux_core::Result;
 use specmux_report::commands;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -23,13 +24,18 @@ fn emit(text: &str) {
 /// Ctrl-C (or SIGTERM) asks the running command to stop at its next safe point; a second one
 /// ends the process at once (the output sets' staging folders keep the final names clean).
 fn install_interrupt_handler() {
-    let handler = || {
+    // The messages may meet a closed stderr (`… 2>&1 | head`): eprintln! would panic and take
+    // the handler's thread, and every later Ctrl-C, with it.
+    let say = |text: &str| {
+        let _ = writeln!(std::io::stderr(), "{text}");
+    };
+    let handler = move || {
         if specmux_core::interrupt::requested() {
-            eprintln!("specmux: interrupted again; stopping now");
+            say("specmux: interrupted again; stopping now");
             std::process::exit(130);
         }
-        eprintln!("specmux: stopping at the next safe point (Ctrl-C again to stop now)");
         specmux_core::interrupt::request();
+        say("specmux: stopping at the next safe point (Ctrl-C again to stop now)");
     };
     if let Err(e) = ctrlc::set_handler(handler) {
         eprintln!("specmux: warning: no Ctrl-C handler ({e}); Ctrl-C stops at once");

@@ -925,6 +925,36 @@ fn cli_same_seed_same_bytes_whatever_the_thread_count() {
     );
 }
 
+/// The exhaustive filter search (several seconds, millions of sets) polls Ctrl-C too: it used to
+/// run to its end and stop only at the simulations after it.
+#[test]
+fn cli_ctrl_c_stops_the_filter_search_itself() {
+    let scratch = temp("ctrl-c-design");
+    let out = scratch.path().join("out");
+    let child = Command::new(env!("CARGO_BIN_EXE_specmux"))
+        .args(["design", "filters", "--size", "64", "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let sent = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("during the filter search"), "{err}");
+    assert!(!out.exists(), "an interrupted design wrote its outputs");
+    record(
+        "cli: Ctrl-C during design filters' exhaustive search",
+        "stopped within the search (exit 130, `… during the filter search`), nothing written",
+    );
+}
+
 #[test]
 fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
     let scratch = temp("ctrl-c");
