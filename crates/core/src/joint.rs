@@ -195,8 +195,16 @@ impl JointConfig {
     /// Range checks; errors name `reconstruct.joint.<field>` and the value.
     pub fn validate(&self, file: &str) -> Result<()> {
         let key = |f: &str| format!("reconstruct.joint.{f}");
+        // Without an iteration the cube would be the start's unfitted coefficients, worse than
+        // the Fourier estimate it is seeded by (`method = "fourier"` is that estimate).
+        check_count(
+            file,
+            &key("iterations"),
+            self.iterations,
+            1..=100_000,
+            "iterations",
+        )?;
         for (field, v, unit) in [
-            ("iterations", self.iterations, "iterations"),
             ("search_iterations", self.search_iterations, "iterations"),
             ("pnp_passes", self.pnp_passes, "passes"),
             ("reweight_rounds", self.rounds(), "rounds"),
@@ -2580,6 +2588,14 @@ mod tests {
                     ..cfg.clone()
                 },
                 "reconstruct.joint.tv_weight",
+            ),
+            (
+                // No iteration would leave the start's unfitted coefficients.
+                JointConfig {
+                    iterations: 0,
+                    ..cfg.clone()
+                },
+                "`reconstruct.joint.iterations` = 0: must be 1 to 100000 iterations",
             ),
             (
                 JointConfig {
