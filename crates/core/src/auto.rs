@@ -346,7 +346,7 @@ pub fn pick_from(table: Table<'_>, budget_s: f64, pixels: usize) -> Option<Choic
         table_psnr_db: e.psnr_db,
         budget_s,
         reason: format!(
-            "{why} ({:?} {} it, {source} on {device}: {:.3} s predicted, {:.2} dB on {scene}; budget {:.3} s)",
+            "{why} ({} {} it, {source} on {device}: {:.3} s predicted, {:.2} dB on {scene}; budget {:.3} s)",
             e.method,
             e.iterations,
             e.seconds * scale,

@@ -28,6 +28,17 @@ pub enum WindowShape {
     SuperGaussian,
 }
 
+impl std::fmt::Display for WindowShape {
+    /// The name an experiment file gives it (`reconstruct.window`).
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(match self {
+            WindowShape::Square => "square",
+            WindowShape::Circular => "circular",
+            WindowShape::SuperGaussian => "super-gaussian",
+        })
+    }
+}
+
 /// A rectangular crop window: centre bin and size in bins; it spans [c − s/2, c − s/2 + s).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Window {

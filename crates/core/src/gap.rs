@@ -35,6 +35,19 @@ pub enum Method {
     Auto,
 }
 
+impl std::fmt::Display for Method {
+    /// The name an experiment file gives it (`reconstruct.gap.method`).
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(match self {
+            Method::Fourier => "fourier",
+            Method::Gap => "gap",
+            Method::GapTv => "gap-tv",
+            Method::Joint => "joint",
+            Method::Auto => "auto",
+        })
+    }
+}
+
 /// Settings of `[reconstruct.gap]`. The paper gives no parameter values; the defaults are the
 /// values tuned on the dead-leaves test frames of this module (docs/gap.md has the sweep).
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -284,7 +284,7 @@ fn candidates(
         let found = optimise::search(&starts, a.restarts, step, obj, a.guard, a.seed, &bar);
         for (k, (_, l)) in found.into_iter().take(a.candidates).enumerate() {
             for &w in &windows {
-                let label = format!("designed #{} (crop {crop}, {w:?})", k + 1);
+                let label = format!("designed #{} (crop {crop}, {w})", k + 1);
                 out.push(candidate(label, l.clone(), w, obj));
             }
         }

@@ -142,8 +142,8 @@ pub struct SweepRow {
     pub seconds: Option<f64>,
     /// Why the run was refused, if it was.
     pub refused: Option<String>,
-    /// The de-aliasing that ran, as its result row names it ("auto: joint (52 it)", "gap (Gap,
-    /// 20 it)", "gap (Fourier, 0 it)"): the x̂ figure is its estimate.
+    /// The de-aliasing that ran, as its result row names it ("auto: joint (52 it)", "gap (20
+    /// it)", "fourier (0 it)"): the x̂ figure is its estimate.
     pub method: Option<String>,
     /// Where the calibration came from: "captures", or "oracle" (the simulator's exact
     /// patterns: no rig's figures; the table's note says ORACLE).

@@ -435,11 +435,8 @@ fn result_rows(
     let gap = match (&out.joint, &recon.auto) {
         (Some(j), None) => format!("joint ({} it)", j.iterations),
         (Some(j), Some(_)) => format!("auto: joint ({} it)", j.iterations),
-        (None, Some(a)) => format!("auto: {:?} ({} it)", a.method, out.gap.iterations),
-        (None, None) => format!(
-            "gap ({:?}, {} it)",
-            exp.reconstruct.gap.method, out.gap.iterations
-        ),
+        (None, Some(a)) => format!("auto: {} ({} it)", a.method, out.gap.iterations),
+        (None, None) => format!("{} ({} it)", exp.reconstruct.gap.method, out.gap.iterations),
     };
     // In the order of `Row`.
     let rows = vec![
