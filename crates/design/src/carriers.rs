@@ -63,7 +63,9 @@ pub struct CarrierArgs {
     /// Also simulate the paper's, the diamond and the chosen layout with the coherent 4f model.
     #[arg(long)]
     pub coherent: bool,
-    /// Experiment giving the wheel, light, camera and reconstruction (default: the prototype).
+    /// Experiment giving the wheel, light, camera QE, η and basis (default: the prototype); its
+    /// optics, timing and sensor are not simulated (ideal patterns; the coherent 4f model with
+    /// --coherent).
     #[arg(long)]
     pub experiment: Option<PathBuf>,
     /// Seed of the search's random restarts (the same seed, the same layouts).
@@ -137,6 +139,30 @@ fn design_scenes(a: &CarrierArgs, base: &Experiment) -> Result<Vec<Experiment>> 
         e.reconstruct.basis = base.reconstruct.basis;
     }
     Ok(out)
+}
+
+/// A note naming the base experiment's stages the layouts are not simulated with (they are
+/// scored with ideal patterns), if it has any.
+fn dropped_stages(base: &Experiment) -> Vec<String> {
+    let r = &base.rig;
+    let stages: Vec<&str> = [
+        ("[rig.dmd]", r.dmd.is_some()),
+        ("[rig.fourier_filter]", r.fourier_filter.is_some()),
+        ("[rig.lens]", r.lens.is_some()),
+        ("[rig.timing]", r.timing.is_some()),
+        ("[rig.sensor]", r.sensor.is_some()),
+    ]
+    .into_iter()
+    .filter_map(|(name, on)| on.then_some(name))
+    .collect();
+    if stages.is_empty() {
+        return Vec::new();
+    }
+    vec![format!(
+        "{}: {} not simulated: the layouts are scored with ideal patterns (and the coherent 4f model with --coherent)",
+        base.file,
+        stages.join(", ")
+    )]
 }
 
 /// An experiment on a user's cube: an experiment file as it is, or an EXR under the base.
@@ -385,7 +411,7 @@ pub fn design(a: &CarrierArgs, lib: &Library) -> Result<CarrierDesign> {
         weights,
         a2: a.harmonic * a.harmonic,
     };
-    let mut notes = Vec::new();
+    let mut notes = dropped_stages(&base);
     let t = Instant::now();
     let mut cands = candidates(a, j, &obj, &mut notes)?;
     let t_search = t.elapsed().as_secs_f64();
@@ -608,4 +634,25 @@ fn write_outputs(a: &CarrierArgs, d: &CarrierDesign, lib: &Library) -> Result<St
         a.out.join("report.json").display()
     );
     Ok(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The prototype has no stage to drop; an experiment with timing and a camera is told that
+    /// both are left out, by name.
+    #[test]
+    fn the_stages_a_design_leaves_out_are_named() {
+        assert!(dropped_stages(&Experiment::prototype()).is_empty());
+        let text = "[scene]\nsize = [64, 64]\n[rig.timing]\n[rig.sensor]\n";
+        let e = Experiment::from_toml(text, "e.toml").unwrap();
+        let [note] = &dropped_stages(&e)[..] else {
+            panic!("one note expected")
+        };
+        assert!(
+            note.starts_with("e.toml: [rig.timing], [rig.sensor] not simulated"),
+            "{note}"
+        );
+    }
 }
