@@ -44,6 +44,22 @@ fn legend(area: &Area, entries: &[(String, ShapeStyle)]) -> std::result::Result<
     Ok(())
 }
 
+/// A curve's name for the legend: a curve written beside the outputs is named by its absolute
+/// path, which would run off the image; its folder and stem (`design/gauss-580-60`) name it.
+fn legend_name(name: &str) -> String {
+    let p = Path::new(name);
+    match (
+        p.is_absolute(),
+        p.parent().and_then(Path::file_name),
+        p.file_stem(),
+    ) {
+        (true, Some(dir), Some(stem)) => {
+            format!("{}/{}", dir.to_string_lossy(), stem.to_string_lossy())
+        }
+        _ => name.to_string(),
+    }
+}
+
 /// Transmittance of each curve over `range_nm`, one colour per curve.
 pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64)) -> Result<()> {
     render(path, SIZE, |plot, leg| {
@@ -72,7 +88,7 @@ pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64))
             chart
                 .draw_series(LineSeries::new(pts, style))
                 .map_err(|e| e.to_string())?;
-            entries.push((c.name.clone(), style));
+            entries.push((legend_name(&c.name), style));
         }
         legend(leg, &entries)
     })
@@ -189,4 +205,18 @@ fn draw_windows(
     ));
     entries.push(("○ ω_i ± ω_j".into(), BLACK.stroke_width(1)));
     Ok(entries)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::legend_name;
+
+    #[test]
+    fn a_curve_written_beside_the_outputs_is_named_by_folder_and_stem() {
+        assert_eq!(
+            legend_name("/tmp/out/filters/design/gauss-580-60.csv"),
+            "design/gauss-580-60"
+        );
+        assert_eq!(legend_name("wheel/red"), "wheel/red");
+    }
 }
