@@ -70,7 +70,8 @@ impl Default for Families {
     }
 }
 
-/// `first, first + step, …, ≤ last`; the error names `key`.
+/// `first, first + step, …, ≤ last`, within the generated curves' sampling; the error names
+/// `key`.
 fn range(key: &str, [a, b, s]: [f64; 3], file: &str) -> Result<Vec<f64>> {
     if !(a.is_finite() && b >= a && s > 0.0) {
         return Err(Error::config(
@@ -79,6 +80,13 @@ fn range(key: &str, [a, b, s]: [f64; 3], file: &str) -> Result<Vec<f64>> {
             format!("[{a}, {b}, {s}]"),
             "needs first ≤ last and a positive step",
         ));
+    }
+    if !(a >= GEN_RANGE_NM.0 && b <= GEN_RANGE_NM.1) {
+        let why = format!(
+            "must lie within the generated curves' {}–{} nm (a curve outside is its floor alone)",
+            GEN_RANGE_NM.0, GEN_RANGE_NM.1
+        );
+        return Err(Error::config(file, key, format!("[{a}, {b}, {s}]"), &why));
     }
     let n = ((b - a) / s + 1e-9).floor() as usize + 1;
     Ok((0..n).map(|k| a + s * k as f64).collect())
@@ -362,6 +370,16 @@ mod tests {
         let e = f.generate("fam.toml").unwrap_err().to_string();
         assert!(
             e.contains("fam.toml") && e.contains("dichroic_bands_nm"),
+            "{e}"
+        );
+        // Centres past the sampled 380–780 nm would give filters that are their floor alone.
+        let wide = Families {
+            gaussian_centres_nm: [100.0, 2000.0, 40.0],
+            ..Default::default()
+        };
+        let e = wide.generate("fam.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("`gaussian_centres_nm` = [100, 2000, 40]") && e.contains("380–780 nm"),
             "{e}"
         );
     }

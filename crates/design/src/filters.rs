@@ -102,6 +102,10 @@ pub fn base_experiment(path: Option<&Path>) -> Result<Experiment> {
     }
 }
 
+/// Most combinations the exhaustive search scores: about 0.7 M a second on two cores (3.8 M in
+/// 5.3 s, docs/design.md), so five minutes.
+const MAX_COMBINATIONS: u64 = 200_000_000;
+
 /// Catalogue, rig and evaluator of a run.
 struct Setup {
     cat: Vec<Candidate>,
@@ -123,6 +127,12 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
             "needs 1 to 16 filters and at most the catalogue's {}",
             cat.len()
         );
+        return Err(Error::config("--choose", "choose", a.choose, &why));
+    }
+    let free = cat.len() - a.keep.len().min(cat.len());
+    let combos = search::binomial(free, a.choose.saturating_sub(a.keep.len()));
+    if combos > MAX_COMBINATIONS {
+        let why = format!("{combos} combinations of the catalogue's {} curves, more than {MAX_COMBINATIONS} (about five minutes on two cores): narrow the families, --keep curves or choose fewer", cat.len());
         return Err(Error::config("--choose", "choose", a.choose, &why));
     }
     // Before the search: a set of another size has no carrier layout to run on.

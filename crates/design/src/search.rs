@@ -135,12 +135,19 @@ fn branch(
     }
 }
 
-/// Number of k-subsets of n.
+/// Number of k-subsets of n, `u64::MAX` where it does not fit (a catalogue no search can cover).
 pub fn binomial(n: usize, k: usize) -> u64 {
     if k > n {
         return 0;
     }
-    (0..k.min(n - k)).fold(1u64, |acc, i| acc * (n - i) as u64 / (i + 1) as u64)
+    // acc·(n − i) is divisible by i + 1 at every step (acc = C(n, i)); u128 holds the product
+    // until acc itself passes u64.
+    (0..k.min(n - k))
+        .try_fold(1u64, |acc, i| {
+            let next = acc as u128 * (n - i) as u128 / (i + 1) as u128;
+            u64::try_from(next).ok()
+        })
+        .unwrap_or(u64::MAX)
 }
 
 /// Score every combination; the best `top` of each criterion (in [`CRITERIA`] order). Ctrl-C
@@ -270,5 +277,6 @@ mod tests {
             assert_eq!(top.items, want[..5].to_vec(), "{}", CRITERIA[k]);
         }
         assert_eq!(binomial(40, 6), 3_838_380);
+        assert_eq!((binomial(10_000, 16), binomial(3, 5)), (u64::MAX, 0));
     }
 }

@@ -131,6 +131,8 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
         experiment: None,
         out: dir.join("out"),
     };
+    let dense = dir.join("dense.toml");
+    std::fs::write(&dense, "gaussian_centres_nm = [380, 780, 4]\ngaussian_fwhm_nm = [80]\nlongpass_edges_nm = [600, 600, 40]\nshortpass_edges_nm = [500, 500, 40]\ndichroic_bands_nm = []\n").unwrap();
     // A count or a light level out of range is refused by its option, before any search.
     for (bad, flag) in [
         (
@@ -153,6 +155,14 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
                 ..a.clone()
             },
             "--choose: `choose` = 0",
+        ),
+        (
+            // 3.6·10⁹ sets of six from 122 curves: hours of search, refused before it.
+            FilterArgs {
+                families: Some(dense.clone()),
+                ..a.clone()
+            },
+            "combinations of the catalogue's 109 curves, more than 200000000",
         ),
         (
             // The prototype has six carriers: a set of five has no layout to run on.
