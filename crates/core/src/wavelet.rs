@@ -50,14 +50,16 @@ impl Dwt2 {
     pub fn new(w: usize, h: usize, levels: usize, wavelet: Wavelet, file: &str) -> Result<Dwt2> {
         let lo64 = wavelet.lowpass();
         let taps = lo64.len();
-        let fits = |n: usize| levels < 32 && n % (1 << levels) == 0 && n >> (levels - 1) >= taps;
-        if levels == 0 || !fits(w) || !fits(h) {
+        let fits = |l: usize, n: usize| l < 32 && n % (1 << l) == 0 && n >> (l.max(1) - 1) >= taps;
+        if levels == 0 || !fits(levels, w) || !fits(levels, h) {
+            let most = (1..32).take_while(|&l| fits(l, w) && fits(l, h)).last();
+            let allowed = most.map_or("no level".to_string(), |l| format!("1 to {l} levels"));
             return Err(Error::config(
                 file,
                 "reconstruct.gap.levels",
                 levels,
                 &format!(
-                    "a {w}×{h} frame allows 1 to L levels where 2^L divides both sides and the last band split keeps ≥ {taps} pixels"
+                    "a {w}×{h} frame allows {allowed} (2^L must divide both sides and the last band split keep ≥ {taps} pixels)"
                 ),
             ));
         }
@@ -331,7 +333,14 @@ mod tests {
         let e = Dwt2::new(100, 64, 3, Wavelet::Haar, "x.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("reconstruct.gap.levels"), "{e}");
+        // 100 = 4·25: two levels divide it; the message says how many.
+        assert!(
+            e.contains("reconstruct.gap.levels")
+                && e.contains("a 100×64 frame allows 1 to 2 levels"),
+            "{e}"
+        );
+        let odd = Dwt2::new(101, 64, 1, Wavelet::Haar, "x").unwrap_err();
+        assert!(odd.to_string().contains("allows no level"), "{odd}");
         assert!(Dwt2::new(64, 64, 0, Wavelet::Haar, "x").is_err());
         // 8 pixels split 3 times leaves a 2-pixel band split last: too short for 4 taps.
         assert!(Dwt2::new(8, 8, 3, Wavelet::Daubechies4, "x").is_err());

@@ -223,13 +223,13 @@ fn measure(
 
 fn parse_window(s: &str) -> Result<WindowShape> {
     WindowShape::deserialize(s.into_deserializer()).map_err(|e: serde::de::value::Error| {
-        Error::config(
-            "--window",
-            "window",
-            s,
-            &format!("{e}; expected square, circular or super-gaussian"),
-        )
+        Error::config("--window", "window", s, &e.to_string())
     })
+}
+
+/// The first value of `v` that an earlier one equals.
+fn first_repeat<T: PartialEq>(v: &[T]) -> Option<&T> {
+    (v.iter().enumerate()).find_map(|(i, x)| v[..i].contains(x).then_some(x))
 }
 
 /// Check the arguments; the error names the option and the value.
@@ -237,6 +237,13 @@ fn check_args(a: &CarrierArgs) -> Result<()> {
     check_count("--size", "size", a.size, 16..=4096, "pixels")?;
     if let Some(c) = a.crop.iter().find(|c| !(**c > 0.0 && **c <= 0.5)) {
         return Err(Error::config("--crop", "crop", c, "must be in (0, 0.5]"));
+    }
+    // A value listed twice would be searched and listed twice.
+    if let Some(c) = first_repeat(&a.crop) {
+        return Err(Error::config("--crop", "crop", c, "is listed twice"));
+    }
+    if let Some(w) = first_repeat(&a.window) {
+        return Err(Error::config("--window", "window", w, "is listed twice"));
     }
     if !(a.harmonic.is_finite() && (0.0..=1.0).contains(&a.harmonic)) {
         return Err(Error::config(
@@ -304,7 +311,7 @@ fn candidates(
                 out.push(candidate(label, d.clone(), square, obj));
                 starts.push(d);
             }
-            Err(e) => notes.push(format!("no diamond baseline at crop {crop}: {e}")),
+            Err(why) => notes.push(format!("no diamond baseline: {why}")),
         }
         let step = (starts[0].window / 12).max(1);
         let found = optimise::search(&starts, a.restarts, step, obj, a.guard, a.seed, &bar);

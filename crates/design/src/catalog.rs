@@ -133,6 +133,15 @@ impl Families {
                 "must be positive",
             ));
         }
+        // The ranges too, so that a families file's error names the file (generating names
+        // whatever its caller gives).
+        for (key, v) in [
+            ("gaussian_centres_nm", self.gaussian_centres_nm),
+            ("longpass_edges_nm", self.longpass_edges_nm),
+            ("shortpass_edges_nm", self.shortpass_edges_nm),
+        ] {
+            range(key, v, file)?;
+        }
         if let Some(b) = self.dichroic_bands_nm.iter().find(|b| !(b[1] > b[0])) {
             let v = format!("[{}, {}]", b[0], b[1]);
             return Err(Error::config(

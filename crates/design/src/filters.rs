@@ -29,7 +29,9 @@ pub struct FilterArgs {
     /// Filters per set (the wheel's segments).
     #[arg(long, default_value_t = 6)]
     pub choose: usize,
-    /// Parametric families to add (TOML; keys in crates/design/src/catalog.rs); default families.
+    /// Parametric families to add (TOML: gaussian_centres_nm and longpass/shortpass_edges_nm as
+    /// [first, last, step], gaussian_fwhm_nm, dichroic_bands_nm, edge_width_nm, peak, floor;
+    /// docs/design.md); default: the families of docs/design.md.
     #[arg(long)]
     pub families: Option<PathBuf>,
     /// Search the folder's curves only.
@@ -202,6 +204,14 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
         ));
     }
     check_count("--top", "top", a.top, 1..=1000, "sets")?;
+    // The set is chosen by simulation: none simulated would leave nothing to choose.
+    check_count(
+        "--simulate",
+        "simulate",
+        a.simulate,
+        1..=a.top,
+        "sets (1 to --top)",
+    )?;
     let t0 = Instant::now();
     let base = base_experiment(a.experiment.as_deref())?;
     let s = setup(a, &base, lib)?;

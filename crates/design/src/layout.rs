@@ -175,8 +175,13 @@ impl Layout {
     /// the diamond (quincunx) lattice {(i, j)·w : i + j even} of the window pitch w, ring by ring
     /// of |i| + |j| away from DC, so no carrier sits on an axis next to DC; axial carriers only up
     /// to fs/4. Where fewer than J lattice sites pass, the fs/4 limit is dropped and a note says
-    /// so; where still fewer, the error names the crop.
-    pub fn diamond(size: usize, crop: f64, count: usize) -> Result<(Layout, Option<String>)> {
+    /// so; where still fewer, there is no diamond layout, and the error says why (a note for the
+    /// report, not a refusal: the diamond is a baseline).
+    pub fn diamond(
+        size: usize,
+        crop: f64,
+        count: usize,
+    ) -> std::result::Result<(Layout, Option<String>), String> {
         let w = window_bins(crop, size) as i64;
         let n = size as i64;
         let mut sites: Vec<(i64, i64)> = Vec::new();
@@ -207,11 +212,8 @@ impl Layout {
                 }
             }
         }
-        Err(Error::config(
-            "--crop",
-            "crop",
-            crop,
-            &format!("the diamond lattice of this crop holds fewer than {count} carriers on a {size}-point frame"),
+        Err(format!(
+            "the diamond lattice of crop {crop} holds fewer than {count} carriers on a {size}-point frame"
         ))
     }
 

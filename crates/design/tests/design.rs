@@ -165,6 +165,13 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
             "combinations of the catalogue's 109 curves, more than 200000000",
         ),
         (
+            FilterArgs {
+                simulate: 0,
+                ..a.clone()
+            },
+            "--simulate: `simulate` = 0",
+        ),
+        (
             // The prototype has six carriers: a set of five has no layout to run on.
             FilterArgs {
                 choose: 5,
@@ -216,6 +223,13 @@ fn carrier_options_out_of_range_are_refused_by_name() {
                 ..base.clone()
             },
             "--crop: `crop` = 0.7",
+        ),
+        (
+            CarrierArgs {
+                crop: vec![0.2, 0.15, 0.2],
+                ..base.clone()
+            },
+            "--crop: `crop` = 0.2: is listed twice",
         ),
         (
             CarrierArgs {
