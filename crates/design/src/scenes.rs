@@ -34,6 +34,28 @@ pub fn files(paths: &[PathBuf], dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(out)
 }
 
+/// A scene file's error after `--size n` replaced its size: the file alone would be blamed for
+/// what the option did.
+fn resized_error(err: Error, resized: Option<usize>) -> Error {
+    match (resized, err) {
+        (
+            Some(n),
+            Error::Config {
+                file,
+                key,
+                value,
+                reason,
+            },
+        ) => Error::Config {
+            file: format!("--size {n} on {file}"),
+            key,
+            value,
+            reason,
+        },
+        (_, err) => err,
+    }
+}
+
 /// The distinct scenes of `files`, each an experiment with an ideal rig; procedural scenes at
 /// `size × size` when given.
 pub fn load(files: &[PathBuf], size: Option<usize>) -> Result<Vec<Experiment>> {
@@ -46,12 +68,13 @@ pub fn load(files: &[PathBuf], size: Option<usize>) -> Result<Vec<Experiment>> {
         e.rig.timing = None;
         e.rig.sensor = None;
         e.reconstruct.crosstalk_weights = None;
-        if let (Some(n), true) = (size, is_procedural(&e)) {
+        let resized = size.filter(|_| is_procedural(&e));
+        if let Some(n) = resized {
             e.scene.size = [n, n];
         }
         let key = |x: &Experiment| format!("{:?} {}", x.scene.source, x.scene.seed);
         if out.iter().all(|o| key(o) != key(&e)) {
-            e.validate()?;
+            e.validate().map_err(|err| resized_error(err, resized))?;
             out.push(e);
         }
     }

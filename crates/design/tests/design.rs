@@ -172,6 +172,14 @@ fn the_chosen_wheel_is_included_by_an_experiment_and_builds_a_rig() {
             "--simulate: `simulate` = 0",
         ),
         (
+            // The option's value, not the scene file, is at fault.
+            FilterArgs {
+                size: 7,
+                ..a.clone()
+            },
+            "--size 7 on ",
+        ),
+        (
             // The prototype has six carriers: a set of five has no layout to run on.
             FilterArgs {
                 choose: 5,
