@@ -925,15 +925,10 @@ fn cli_same_seed_same_bytes_whatever_the_thread_count() {
     );
 }
 
-/// The exhaustive filter search (several seconds, millions of sets) polls Ctrl-C too: it used to
-/// run to its end and stop only at the simulations after it.
-#[test]
-fn cli_ctrl_c_stops_the_filter_search_itself() {
-    let scratch = temp("ctrl-c-design");
-    let out = scratch.path().join("out");
+/// Run specmux with `args`, send it SIGINT after 1.5 s, and return its exit code and stderr.
+fn interrupted(args: &[&str]) -> (Option<i32>, String) {
     let child = Command::new(env!("CARGO_BIN_EXE_specmux"))
-        .args(["design", "filters", "--size", "64", "--out"])
-        .arg(&out)
+        .args(args)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -945,8 +940,21 @@ fn cli_ctrl_c_stops_the_filter_search_itself() {
         .unwrap();
     assert!(sent.success());
     let o = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{err}");
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// The exhaustive filter search (several seconds, millions of sets) polls Ctrl-C too: it used to
+/// run to its end and stop only at the simulations after it.
+#[test]
+fn cli_ctrl_c_stops_the_filter_search_itself() {
+    let scratch = temp("ctrl-c-design");
+    let out = scratch.path().join("out");
+    let args = ["design", "filters", "--size", "64", "--out"];
+    let (code, err) = interrupted(&[&args[..], &[out.to_str().unwrap()]].concat());
+    assert_eq!(code, Some(130), "{err}");
     assert!(err.contains("during the filter search"), "{err}");
     assert!(!out.exists(), "an interrupted design wrote its outputs");
     record(
@@ -962,23 +970,19 @@ fn cli_ctrl_c_stops_a_sweep_at_a_safe_point_and_writes_nothing() {
     let out = d.join("out");
     let values: Vec<String> = (1..=300).map(|i| i.to_string()).collect();
     let vary = format!("reconstruct.gap.iterations={}", values.join(";"));
-    let child = Command::new(env!("CARGO_BIN_EXE_specmux"))
-        .args(["sweep", "dead-leaves", "--size", "64", "--vary", &vary])
-        .args(["--vary", "reconstruct.gap.method=gap"])
-        .args(["--out", out.to_str().unwrap()])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(1500));
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(sent.success());
-    let o = child.wait_with_output().unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{err}");
+    let (code, err) = interrupted(&[
+        "sweep",
+        "dead-leaves",
+        "--size",
+        "64",
+        "--vary",
+        &vary,
+        "--vary",
+        "reconstruct.gap.method=gap",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(130), "{err}");
     assert!(err.contains("interrupted (Ctrl-C) during"), "{err}");
     assert!(!out.exists(), "an interrupted sweep wrote its outputs");
     let left = std::fs::read_dir(d).unwrap().count();

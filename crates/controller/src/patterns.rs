@@ -1,8 +1,9 @@
 //! The binary pictures the controller uploads to the DMD, made from the design alone: each
 //! carrier's sinusoid s_k = 1 + cos(2π ω_k·p + φ_k), halved into [0, 1] and error-diffused
 //! (Floyd–Steinberg) into one bit plane, since the rig's 1 kHz wheel leaves a sixth of a turn
-//! per pattern — far too short for grey levels, which a DMD shows as bit-plane sequences. The
-//! calibration also needs an all-dark and an all-bright picture.
+//! per pattern — far too short for grey levels, which a DMD shows as bit-plane sequences. A
+//! picture covers all the DMD's mirrors, the sinusoid laid out as the camera sees them through the
+//! lens. The calibration also needs an all-dark and an all-bright picture.
 
 use crate::devices::BitPlane;
 use crate::error::Result;

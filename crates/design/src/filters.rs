@@ -210,7 +210,7 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
         "simulate",
         a.simulate,
         1..=a.top,
-        "sets (1 to --top)",
+        "sets (at most --top)",
     )?;
     let t0 = Instant::now();
     let base = base_experiment(a.experiment.as_deref())?;
