@@ -160,8 +160,9 @@ fn suffixed(prefix: &Path, suffix: &str) -> PathBuf {
     PathBuf::from(s)
 }
 
-/// Read an EXR whose channels must be exactly `names` in this order, with finite values.
-fn read_named(path: &Path, names: &[String]) -> Result<Cube> {
+/// Read an EXR whose channels must be exactly `names` (`what` says whence) in this order, with
+/// finite values.
+fn read_named(path: &Path, names: &[String], what: &str) -> Result<Cube> {
     let (cube, found) = specmux_io::exr::read(path)?;
     let err = |msg: String| Error::Exr {
         path: path.to_path_buf(),
@@ -169,7 +170,7 @@ fn read_named(path: &Path, names: &[String]) -> Result<Cube> {
     };
     if found.len() != names.len() {
         return Err(err(format!(
-            "{} channels, expected {} ({} … {})",
+            "{} channels, expected {} ({} … {}: {what})",
             found.len(),
             names.len(),
             names[0],
@@ -192,12 +193,13 @@ pub fn read_truth(path: &Path, grid: &Grid) -> Result<Cube> {
         .into_iter()
         .map(specmux_io::exr::band_name)
         .collect();
-    read_named(path, &names)
+    let what = "the bands of scene.wavelengths_nm; render on that grid or set it to the render's";
+    read_named(path, &names, what)
 }
 
 /// Read `<prefix>_wheel.exr`: x_i = ∫ S_i L dλ, channels `WHEEL_CHANNELS`.
 pub fn read_wheel(path: &Path) -> Result<Cube> {
-    read_named(path, &WHEEL_CHANNELS.map(String::from))
+    read_named(path, &WHEEL_CHANNELS.map(String::from), "the wheel's channels")
 }
 
 /// S_i as the renders integrate it: T_i·QE sampled every 1 nm on [lo, hi] nm, linear in between,
@@ -355,7 +357,9 @@ mod tests {
         let p = write_exr(dir, "short_truth.exr", 16, 16, &names);
         let e = read_truth(&p, &g).unwrap_err().to_string();
         assert!(
-            e.contains("short_truth.exr") && e.contains("30 channels"),
+            e.contains("short_truth.exr")
+                && e.contains("30 channels")
+                && e.contains("scene.wavelengths_nm"),
             "{e}"
         );
         names.push("0705.0nm".into());
