@@ -408,9 +408,12 @@ pub fn keyed_line_plot(
 }
 
 /// `count` pixels of `truth` (or of a reconstruction where there is none) with distinct
-/// spectra: the brightest, then each farthest in spectral angle from those already chosen
-/// (searched on a coarse grid that keeps a twenty-fourth of the side from the edges, so a
-/// pixel's mark on the comparison panel is not cut by the frame's border).
+/// spectra, among the pixels between half the median brightness and twice its 90th percentile
+/// (a dark pixel's angle is its noise's, and a radiance scene's black corners would win it; a
+/// lamp in view would flatten every other curve of the plot): one at the 90th percentile, then
+/// each farthest in spectral angle from those already chosen. Searched on a coarse grid
+/// that keeps a twenty-fourth of the side from the edges, so a pixel's mark on the comparison
+/// panel is not cut by the frame's border.
 pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
     let side = truth.width.min(truth.height);
     let (step, margin) = ((side / 48).max(1), side / 24);
@@ -425,15 +428,25 @@ pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
         let d: f64 = a.iter().zip(b).map(|(x, y)| *x as f64 * *y as f64).sum();
         (d / (norm(a) * norm(b)).max(1e-30)).clamp(-1.0, 1.0).acos()
     };
-    let Some(first) = cands
-        .iter()
-        .max_by(|a, b| norm(&a.2).total_cmp(&norm(&b.2)))
+    let mut norms: Vec<f64> = cands.iter().map(|c| norm(&c.2)).collect();
+    norms.sort_by(f64::total_cmp);
+    let Some(&median) = norms.get(norms.len() / 2) else {
+        return Vec::new();
+    };
+    let p90 = norms[norms.len() * 9 / 10];
+    let (floor, ceiling) = (0.5 * median, 2.0 * p90);
+    let lit = |c: &&(usize, usize, Vec<f32>)| {
+        let n = norm(&c.2);
+        n > 0.0 && n >= floor && n <= ceiling
+    };
+    let off_p90 = |c: &&(usize, usize, Vec<f32>)| (norm(&c.2) - p90).abs();
+    let Some(first) = (cands.iter().filter(lit)).min_by(|a, b| off_p90(a).total_cmp(&off_p90(b)))
     else {
         return Vec::new();
     };
     let mut chosen = vec![first];
     while chosen.len() < count.min(cands.len()) {
-        let next = cands.iter().filter(|c| norm(&c.2) > 0.0).max_by(|a, b| {
+        let next = cands.iter().filter(lit).max_by(|a, b| {
             let da = chosen
                 .iter()
                 .map(|c| angle(&a.2, &c.2))
@@ -584,6 +597,41 @@ mod tests {
         assert_eq!(col.chip(&dim), [r, g, b]);
         assert!(r == 255 && r > 2 * g.max(b), "{:?}", [r, g, b]);
         assert_eq!(col.chip(&vec![0.0; grid.count]), [0, 0, 0]);
+    }
+
+    /// A radiance scene: a bright lamp, walls of two colours, a grey ceiling and a black border.
+    /// The pixels are the ceiling (at the 90th percentile of brightness) and the two walls — not
+    /// the lamp, which would flatten the other curves, nor the border, whose zero spectra have no
+    /// angle, nor the dim corner pixels whose noise would be the farthest in angle.
+    #[test]
+    fn distinct_pixels_skip_the_dark_ones() {
+        let (w, h) = (96, 96);
+        let mut c = Cube::zeros(w, h, 3);
+        for y in 0..h {
+            for x in 0..w {
+                let v: [f32; 3] = match (x, y) {
+                    (0..=7, _) | (_, 0..=7) => [0.0, 0.0, 0.0],
+                    (8..=11, 8..=11) => [1e-3, 0.0, 2e-3],
+                    (40..=47, 40..=47) => [100.0, 100.0, 100.0],
+                    (_, 8..=23) => [4.0, 4.0, 4.0],
+                    (_, 0..=47) => [5.0, 1.0, 1.0],
+                    _ => [1.0, 5.0, 1.0],
+                };
+                for (k, vk) in v.iter().enumerate() {
+                    c.data[k * w * h + y * w + x] = *vk;
+                }
+            }
+        }
+        let px = distinct_pixels(&c, 3);
+        let at = |&(x, y): &(usize, usize)| c.spectrum(x, y);
+        assert_eq!(at(&px[0]), vec![4.0, 4.0, 4.0]);
+        let mut rest: Vec<Vec<f32>> = px[1..].iter().map(at).collect();
+        rest.sort_by(|a, b| a[0].total_cmp(&b[0]));
+        assert_eq!(
+            rest,
+            vec![vec![1.0, 5.0, 1.0], vec![5.0, 1.0, 1.0]],
+            "{px:?}"
+        );
     }
 
     #[test]
