@@ -115,6 +115,7 @@ pub enum Command {
         experiment: String,
         #[arg(long, default_value = "out/patterns")]
         out: PathBuf,
+        /// Override the frame size (square); a `[rig.dmd]` keeps its own mirror count.
         #[arg(long)]
         size: Option<usize>,
         /// Dithering study instead: every dither × illumination at these pinhole radii (µm,

@@ -173,7 +173,7 @@ pub fn faults(specs: &[String], frames: usize, key: &str) -> Result<Faults> {
             key,
             spec,
             format!(
-                "exposure {} is past the plan's {frames} frames (exposures 0 to {})",
+                "exposure {} is past the plan's {frames} frames (scene exposures 0 to {}, counted from the first scene frame, not by frame id)",
                 f.exposure,
                 frames.saturating_sub(1)
             ),
@@ -449,7 +449,8 @@ pub struct RunArgs {
     /// Print the plan, its checks and the expected timeline; send nothing.
     #[arg(long)]
     pub dry_run: bool,
-    /// Inject a fault in the simulated rig, KIND@EXPOSURE, e.g. dropped-frame@5.
+    /// Inject a fault in the simulated rig, KIND@EXPOSURE, e.g. dropped-frame@5; EXPOSURE counts
+    /// the scene's exposures from 0 (frame ids count the calibration's exposures too).
     #[arg(long)]
     pub fault: Vec<String>,
     /// Output folder (default out/rehearse or out/acquire).

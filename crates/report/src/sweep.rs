@@ -143,7 +143,7 @@ pub struct SweepRow {
     /// Why the run was refused, if it was.
     pub refused: Option<String>,
     /// The de-aliasing that ran, as its result row names it ("auto: joint (52 it)", "gap (20
-    /// it)", "fourier (0 it)"): the x̂ figure is its estimate.
+    /// it)", "fourier"): the x̂ figure is its estimate.
     pub method: Option<String>,
     /// Where the calibration came from: "captures", or "oracle" (the simulator's exact
     /// patterns: no rig's figures; the table's note says ORACLE).

@@ -12,6 +12,7 @@ use serde::Serialize;
 use specmux_core::calibration::{self, Calibration, CalibrationFrames, MeasuredCarrier};
 use specmux_core::crosstalk::{self, ErrorBudget};
 use specmux_core::demux::{Demux, SUPER_GAUSSIAN_ORDER};
+use specmux_core::gap::Method;
 use specmux_core::metrics::{self, Metrics};
 use specmux_core::noise::reads_saturation;
 use specmux_core::reconstructor::{Reconstruction, Reconstructor};
@@ -436,6 +437,8 @@ fn result_rows(
         (Some(j), None) => format!("joint ({} it)", j.iterations),
         (Some(j), Some(_)) => format!("auto: joint ({} it)", j.iterations),
         (None, Some(a)) => format!("auto: {} ({} it)", a.method, out.gap.iterations),
+        // Fourier has no iterations to count.
+        (None, None) if exp.reconstruct.gap.method == Method::Fourier => "fourier".to_string(),
         (None, None) => format!("{} ({} it)", exp.reconstruct.gap.method, out.gap.iterations),
     };
     // In the order of `Row`.

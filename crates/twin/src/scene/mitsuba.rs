@@ -199,7 +199,11 @@ pub fn read_truth(path: &Path, grid: &Grid) -> Result<Cube> {
 
 /// Read `<prefix>_wheel.exr`: x_i = ∫ S_i L dλ, channels `WHEEL_CHANNELS`.
 pub fn read_wheel(path: &Path) -> Result<Cube> {
-    read_named(path, &WHEEL_CHANNELS.map(String::from), "the wheel's channels")
+    read_named(
+        path,
+        &WHEEL_CHANNELS.map(String::from),
+        "the wheel's channels",
+    )
 }
 
 /// S_i as the renders integrate it: T_i·QE sampled every 1 nm on [lo, hi] nm, linear in between,
