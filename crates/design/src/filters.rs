@@ -10,8 +10,9 @@ use crate::{plot, scenes};
 use serde::Serialize;
 use specmux_core::error::check_count;
 use specmux_core::interrupt;
-use specmux_core::spectral::Library;
+use specmux_core::spectral::{Curve, Grid, Library};
 use specmux_core::{Error, Result};
+use specmux_report::plot::Colorimetry;
 use specmux_report::progress;
 use specmux_twin::optics::wheel::ColorWheel;
 use specmux_twin::scene::Materials;
@@ -426,6 +427,15 @@ fn sim_table(sims: &[Simulated], chosen: usize) -> String {
     t
 }
 
+/// The colour of each filter: its transmittance seen under equal-energy white, at full brightness.
+fn chips(curves: &[Curve], lib: &Library) -> Result<Vec<[u8; 3]>> {
+    let grid = Grid::VISIBLE;
+    let col = Colorimetry::new(lib, &grid, None)?;
+    let on_grid =
+        |c: &Curve| -> Vec<f64> { grid.wavelengths().iter().map(|&w| c.eval(w)).collect() };
+    Ok(curves.iter().map(|c| col.chip(&on_grid(c))).collect())
+}
+
 /// `wheel.toml`, the curve PNGs and `report.json`; returns the lines naming them.
 #[allow(clippy::too_many_arguments)]
 fn write_outputs(
@@ -464,6 +474,7 @@ fn write_outputs(
             &a.out.join(&file),
             &format!("Filter set: {}", sim.label),
             &refs,
+            &chips(&curves, lib)?,
             s.range_nm,
         )?;
         let _ = writeln!(text, "wrote {}", a.out.join(file).display());

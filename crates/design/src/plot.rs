@@ -31,13 +31,33 @@ fn render(
     })
 }
 
-/// One legend entry per (label, style) in the legend column, from the top.
-fn legend(area: &Area, entries: &[(String, ShapeStyle)]) -> std::result::Result<(), String> {
+/// A line of a plot: its style and, where it must be told from a line of the same colour, its
+/// dash (length, gap) in pixels.
+#[derive(Clone, Copy)]
+struct Line {
+    style: ShapeStyle,
+    dash: Option<(u32, u32)>,
+}
+
+impl From<ShapeStyle> for Line {
+    fn from(style: ShapeStyle) -> Line {
+        Line { style, dash: None }
+    }
+}
+
+/// One legend entry per (label, line) in the legend column, from the top.
+fn legend(area: &Area, entries: &[(String, Line)]) -> std::result::Result<(), String> {
     let font = ("sans-serif", 15).into_font();
-    for (k, (label, style)) in entries.iter().enumerate() {
+    for (k, (label, line)) in entries.iter().enumerate() {
         let y = 60 + 24 * k as i32;
-        area.draw(&PathElement::new(vec![(8, y), (38, y)], *style))
-            .map_err(|e| e.to_string())?;
+        let sample = vec![(8, y), (38, y)];
+        match line.dash {
+            None => area.draw(&PathElement::new(sample, line.style)),
+            Some((on, off)) => area.draw(&plotters::element::DashedPathElement::new(
+                sample, on, off, line.style,
+            )),
+        }
+        .map_err(|e| e.to_string())?;
         area.draw(&Text::new(label.clone(), (46, y - 8), font.clone()))
             .map_err(|e| e.to_string())?;
     }
@@ -60,8 +80,37 @@ fn legend_name(name: &str) -> String {
     }
 }
 
-/// Transmittance of each curve over `range_nm`, one colour per curve.
-pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64)) -> Result<()> {
+/// Each curve in its filter's own colour (`chips`: full-brightness sRGB), darkened to show on
+/// white; a curve whose colour an earlier one nearly shares is dashed, a third dotted, so that
+/// the legend tells them apart.
+fn lines(chips: &[[u8; 3]]) -> Vec<Line> {
+    const DASHES: [Option<(u32, u32)>; 3] = [None, Some((10, 6)), Some((3, 4))];
+    let near = |a: &[u8; 3], b: &[u8; 3]| {
+        let d2: i32 = (0..3).map(|k| (a[k] as i32 - b[k] as i32).pow(2)).sum();
+        d2 < 60 * 60
+    };
+    chips
+        .iter()
+        .enumerate()
+        .map(|(k, c)| {
+            let same = chips[..k].iter().filter(|d| near(c, d)).count();
+            let dark = |v: u8| (v as f64 * 0.8) as u8;
+            Line {
+                style: RGBColor(dark(c[0]), dark(c[1]), dark(c[2])).stroke_width(2),
+                dash: DASHES[same.min(2)],
+            }
+        })
+        .collect()
+}
+
+/// Transmittance of each curve over `range_nm`, each in its own colour (`chips`, one per curve).
+pub fn curves(
+    path: &Path,
+    title: &str,
+    curves: &[&Curve],
+    chips: &[[u8; 3]],
+    range_nm: (f64, f64),
+) -> Result<()> {
     render(path, SIZE, |plot, leg| {
         let mut chart = ChartBuilder::on(plot)
             .caption(title, ("sans-serif", 20))
@@ -77,18 +126,21 @@ pub fn curves(path: &Path, title: &str, curves: &[&Curve], range_nm: (f64, f64))
             .draw()
             .map_err(|e| e.to_string())?;
         let mut entries = Vec::new();
-        for (k, c) in curves.iter().enumerate() {
-            let style = ShapeStyle::from(Palette99::pick(k).to_rgba()).stroke_width(2);
+        for (c, line) in curves.iter().zip(lines(chips)) {
             let pts = c
                 .wavelengths()
                 .iter()
                 .zip(c.values())
                 .filter(|(l, _)| (range_nm.0..=range_nm.1).contains(*l))
                 .map(|(&l, &v)| (l, v));
-            chart
-                .draw_series(LineSeries::new(pts, style))
-                .map_err(|e| e.to_string())?;
-            entries.push((legend_name(&c.name), style));
+            match line.dash {
+                None => chart.draw_series(LineSeries::new(pts, line.style)),
+                Some((on, off)) => {
+                    chart.draw_series(DashedLineSeries::new(pts, on, off, line.style))
+                }
+            }
+            .map_err(|e| e.to_string())?;
+            entries.push((legend_name(&c.name), line));
         }
         legend(leg, &entries)
     })
@@ -132,7 +184,7 @@ pub fn fourier_plane(path: &Path, title: &str, layout: &Layout, spectrum: &[f64]
             .map_err(|e| e.to_string())?;
         let mut entries = vec![(
             "scene power, log10 (8 decades)".to_string(),
-            ShapeStyle::from(RGBColor(90, 90, 90)).stroke_width(8),
+            Line::from(ShapeStyle::from(RGBColor(90, 90, 90)).stroke_width(8)),
         )];
         entries.extend(draw_windows(&mut chart, layout)?);
         legend(leg, &entries)
@@ -145,7 +197,7 @@ type Chart<'a> = ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64,
 fn draw_windows(
     chart: &mut Chart<'_>,
     layout: &Layout,
-) -> std::result::Result<Vec<(String, ShapeStyle)>, String> {
+) -> std::result::Result<Vec<(String, Line)>, String> {
     let n = layout.size as f64;
     let half = layout.window as f64 / 2.0 / n;
     let wrap = |v: f64| (v + 0.5).rem_euclid(1.0) - 0.5;
@@ -169,7 +221,7 @@ fn draw_windows(
             .collect::<Vec<_>>()
     };
     let e = |e: DrawingAreaErrorKind<_>| e.to_string();
-    let mut entries = vec![("DC window".to_string(), BLACK.stroke_width(2))];
+    let mut entries: Vec<(String, Line)> = vec![("DC window".into(), BLACK.stroke_width(2).into())];
     chart
         .draw_series(rect(0.0, 0.0, BLACK.stroke_width(2)))
         .map_err(e)?;
@@ -188,7 +240,7 @@ fn draw_windows(
         chart.draw_series(marks).map_err(e)?;
         entries.push((
             format!("ω{i} = ({bx}, {by})/{} (+ thick, − thin)", layout.size),
-            c.stroke_width(3),
+            c.stroke_width(3).into(),
         ));
     }
     let terms = layout.intermodulation();
@@ -201,15 +253,23 @@ fn draw_windows(
         .map_err(e)?;
     entries.push((
         "× 2ω_i harmonic (colour of i)".into(),
-        BLACK.stroke_width(1),
+        BLACK.stroke_width(1).into(),
     ));
-    entries.push(("○ ω_i ± ω_j".into(), BLACK.stroke_width(1)));
+    entries.push(("○ ω_i ± ω_j".into(), BLACK.stroke_width(1).into()));
     Ok(entries)
 }
 
 #[cfg(test)]
 mod tests {
-    use super::legend_name;
+    use super::{legend_name, lines};
+
+    /// Two blues and a red: the red solid, the first blue solid, the second dashed.
+    #[test]
+    fn a_curve_of_a_colour_already_drawn_is_dashed() {
+        let l = lines(&[[40, 60, 230], [230, 30, 20], [50, 70, 220]]);
+        let dashes: Vec<_> = l.iter().map(|x| x.dash).collect();
+        assert_eq!(dashes, vec![None, None, Some((10, 6))]);
+    }
 
     #[test]
     fn a_curve_written_beside_the_outputs_is_named_by_folder_and_stem() {
