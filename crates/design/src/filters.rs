@@ -114,6 +114,8 @@ struct Setup {
     cat: Vec<Candidate>,
     ev: Evaluator,
     keep: Vec<usize>,
+    /// The sets the exhaustive search scores.
+    combos: u64,
     range_nm: (f64, f64),
 }
 
@@ -132,8 +134,16 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
         );
         return Err(Error::config("--choose", "choose", a.choose, &why));
     }
-    let free = cat.len() - a.keep.len().min(cat.len());
-    let combos = search::binomial(free, a.choose.saturating_sub(a.keep.len()));
+    let keep = a
+        .keep
+        .iter()
+        .map(|k| {
+            cat.iter()
+                .position(|c| &c.name == k)
+                .ok_or_else(|| Error::config("--keep", "keep", k, "is not in the catalogue"))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let combos = search::combinations(cat.len(), a.choose, &keep);
     if combos > MAX_COMBINATIONS {
         let why = format!("{combos} combinations of the catalogue's {} curves, more than {MAX_COMBINATIONS} (about five minutes on two cores): narrow the families, --keep curves or choose fewer", cat.len());
         return Err(Error::config("--choose", "choose", a.choose, &why));
@@ -144,15 +154,6 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
         let why = format!("one filter per carrier: the experiment ({}) has {carriers} carriers (rig.carriers.frequencies)", base.file);
         return Err(Error::config("--choose", "choose", a.choose, &why));
     }
-    let keep = a
-        .keep
-        .iter()
-        .map(|k| {
-            cat.iter()
-                .position(|c| &c.name == k)
-                .ok_or_else(|| Error::config("--keep", "keep", k, "is not in the catalogue"))
-        })
-        .collect::<Result<Vec<_>>>()?;
     let materials = Materials::load(lib)?;
     let rig = Rig::build(base, lib, &materials)?;
     let wheel = ColorWheel {
@@ -190,6 +191,7 @@ fn setup(a: &FilterArgs, base: &Experiment, lib: &Library) -> Result<Setup> {
         cat,
         ev,
         keep,
+        combos,
         range_nm,
     })
 }
@@ -228,10 +230,7 @@ pub fn run(a: &FilterArgs, lib: &Library) -> Result<String> {
     let ranked = search::exhaustive(&s.ev, a.choose, &s.keep, a.top, &bar)?;
     bar.finish_and_clear();
     let t_all = t.elapsed().as_secs_f64();
-    let combos = search::binomial(
-        s.ev.len() - s.keep.len(),
-        a.choose - s.keep.len().min(a.choose),
-    );
+    let combos = s.combos;
     let mut text = String::new();
     let _ = writeln!(
         text,

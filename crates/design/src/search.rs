@@ -135,6 +135,12 @@ fn branch(
     }
 }
 
+/// How many sets of `choose` of `n` candidates, each holding every `keep`, the searches go over.
+pub fn combinations(n: usize, choose: usize, keep: &[usize]) -> u64 {
+    let (free, need) = split(n, choose, keep);
+    binomial(free.len(), need)
+}
+
 /// Number of k-subsets of n, `u64::MAX` where it does not fit (a catalogue no search can cover).
 pub fn binomial(n: usize, k: usize) -> u64 {
     if k > n {
