@@ -651,13 +651,15 @@ pub fn auto_pick(rows: &[BenchRow], pixels: usize) -> Option<auto::Choice> {
 
 /// Final-cube PSNR against median run time, log time axis (ln t drawn linearly, ticked at 1, 2
 /// and 5 × 10ⁿ s, so that every decade gets labels), one colour per method, the Pareto
-/// front as a line through its points, each labelled with its setting, and the setting that
-/// `method = "auto"` picks for this frame size at the default budget ringed.
+/// front as a line through its points, each labelled with its setting, and `pick`, the setting
+/// that `method = "auto"` picks from these rows for a frame of `pixels` at the default budget
+/// ([`auto_pick`]), ringed.
 pub fn work_precision_plot(
     path: &Path,
     title: &str,
     rows: &[BenchRow],
     pixels: usize,
+    pick: Option<&auto::Choice>,
 ) -> Result<()> {
     let ok: Vec<&BenchRow> = rows
         .iter()
@@ -675,7 +677,6 @@ pub fn work_precision_plot(
         (p0, p1) = (p0.min(r.psnr_db), p1.max(r.psnr_db));
     }
     let pad = 0.05 * (p1 - p0).max(0.1);
-    let auto = auto_pick(rows, pixels);
     // The time axis, with room for the labels right of the slowest point.
     let (x0, x1) = (t0 / 1.3, t1 * 2.5);
     plot::render_png(path, (1000, 640), |root| {
@@ -805,7 +806,7 @@ pub fn work_precision_plot(
             .map_err(|x| e(&x))?;
         // At the pick's predicted time and PSNR: a measured point, or one interpolated between
         // two measured counts of its method.
-        let picked = auto
+        let picked = pick
             .iter()
             .map(|a| (a.predicted_seconds.ln(), a.table_psnr_db));
         chart

@@ -283,7 +283,8 @@ pub fn bench(
     )?;
     let mut md = crate::bench::work_precision_markdown(&rows);
     // The setting the plot rings, in words.
-    if let Some(a) = crate::bench::auto_pick(&rows, sim.frame.pixels()) {
+    let pick = crate::bench::auto_pick(&rows, sim.frame.pixels());
+    if let Some(a) = &pick {
         md += &format!("\n`method = \"auto\"` from these rows: {}\n", a.reason);
     }
     if sim.calibration.is_oracle() {
@@ -308,6 +309,7 @@ pub fn bench(
         ),
         &rows,
         sim.frame.pixels(),
+        pick.as_ref(),
     )?;
     finish(files, out, &mut text)?;
     Ok(text)
