@@ -426,13 +426,15 @@ fn sim_table(sims: &[Simulated], chosen: usize) -> String {
     t
 }
 
-/// The colour of each filter: its transmittance seen under equal-energy white, at full brightness.
-fn chips(curves: &[Curve], lib: &Library) -> Result<Vec<[u8; 3]>> {
-    let grid = Grid::VISIBLE;
-    let col = Colorimetry::new(lib, &grid, None)?;
-    let on_grid =
-        |c: &Curve| -> Vec<f64> { grid.wavelengths().iter().map(|&w| c.eval(w)).collect() };
-    Ok(curves.iter().map(|c| col.chip(&on_grid(c))).collect())
+/// The colour of each filter: its transmittance seen under equal-energy white (`col`, on
+/// [`Grid::VISIBLE`]), at full brightness.
+fn chips(curves: &[Curve], col: &Colorimetry) -> Vec<[u8; 3]> {
+    let on_grid = |c: &Curve| -> Vec<f64> {
+        (Grid::VISIBLE.wavelengths().iter())
+            .map(|&w| c.eval(w))
+            .collect()
+    };
+    curves.iter().map(|c| col.chip(&on_grid(c))).collect()
 }
 
 /// `wheel.toml`, the curve PNGs and `report.json`; returns the lines naming them.
@@ -458,6 +460,7 @@ fn write_outputs(
     );
     specmux_io::atomic::write_bytes(&a.out.join("wheel.toml"), toml.as_bytes())?;
     let mut text = String::new();
+    let col = Colorimetry::new(lib, &Grid::VISIBLE, None)?;
     for sim in sims
         .iter()
         .filter(|x| x.label.ends_with("#1") || x.label == c.label)
@@ -473,7 +476,7 @@ fn write_outputs(
             &a.out.join(&file),
             &format!("Filter set: {}", sim.label),
             &refs,
-            &chips(&curves, lib)?,
+            &chips(&curves, &col),
             s.range_nm,
         )?;
         let _ = writeln!(text, "wrote {}", a.out.join(file).display());
