@@ -24,8 +24,7 @@ mod shear;
 mod sliced;
 
 pub use pairs::direct_pair_sums;
-#[cfg(test)]
-pub(crate) use pairs::relative_difference;
+pub use pairs::relative_difference;
 use pairs::Interval;
 pub use pairs::PairSums;
 pub use pairs::PassedBin;

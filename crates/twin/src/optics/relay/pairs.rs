@@ -73,6 +73,11 @@ impl PairSums {
         }
     }
 
+    /// The cells of the half box the sums are stored on (each holds both components).
+    pub fn cells(&self) -> usize {
+        self.s[0].len()
+    }
+
     /// Both components at (qx, qy), zero outside the pairs' reach.
     pub fn at(&self, qx: i64, qy: i64) -> [Complex64; 2] {
         let value = |i: usize| [self.s[0][i], self.s[1][i]];
@@ -152,9 +157,9 @@ pub(super) fn add_pairs(bins: &[PassedBin], sums: &mut PairSums) {
 }
 
 /// Per component, the largest |a − b| over the cells either holds relative to b's
-/// largest |sum| (absolute where that is 0): sums on different maps compared cell by cell.
-#[cfg(test)]
-pub(crate) fn relative_difference(a: &PairSums, b: &PairSums) -> [f64; 2] {
+/// largest |sum| (absolute where that is 0): sums on different maps compared cell by cell
+/// (the tests' and `benches/relay.rs`' measure of the GPU kernel against the CPU).
+pub fn relative_difference(a: &PairSums, b: &PairSums) -> [f64; 2] {
     let worst = |x: &PairSums, y: &PairSums, c: usize| {
         (x.half_plane())
             .map(|((qx, qy), v, _)| (v[c] - y.at(qx, qy)[c]).norm())
