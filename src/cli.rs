@@ -73,8 +73,8 @@ pub enum Command {
         #[arg(long)]
         size: Option<usize>,
         /// Where to reconstruct: cpu, gpu (needs the gpu feature and an adapter) or auto; the
-        /// default is the experiment's [compute] device. Settings without a GPU kernel (plug-and-
-        /// play, noise-aware) stay on the CPU; the table and plot say where each ran.
+        /// default is the experiment's [compute] device. Settings without a GPU kernel (the
+        /// plug-and-play prior) stay on the CPU; the table and plot say where each ran.
         #[arg(long, value_parser = ["cpu", "gpu", "auto"])]
         device: Option<String>,
     },

@@ -19,9 +19,10 @@ use specmux_core::gap::GapConfig;
 use specmux_core::gap::Method;
 use specmux_core::joint::{self, Prior, WeightRule};
 use specmux_core::metrics;
-use specmux_core::reconstructor::{ComputeDevice, Reconstructor};
+use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
+use specmux_twin::device::OpenDevice;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::pattern_cache::PatternCache;
@@ -205,7 +206,7 @@ pub const GPU_JOINT_ITERATIONS: [usize; 3] = [160, 320, 640];
 /// cannot split the frame, [`gap_left_out`]); on a hardware GPU the joint method at
 /// [`GPU_JOINT_ITERATIONS`] too; and where the rig has a camera (a noise model) the joint
 /// method's noise-aware rows — weighted, and with the discrepancy λ — at 20, 40, 80 it.
-pub fn grid_for(sim: &Simulated, device: &Device) -> Vec<Setting> {
+pub fn grid_for(sim: &Simulated, device: &OpenDevice) -> Vec<Setting> {
     let mut g = default_grid();
     if gap_left_out(sim).is_some() {
         g.retain(|s| s.method != Method::Gap);
@@ -256,98 +257,10 @@ fn default_rounds(iterations: usize, prior: Prior, noise: NoiseAware) -> usize {
     joint::default_rounds(iterations, prior, weight_rule)
 }
 
-/// Where the work–precision runs go (`specmux bench --device`, `[compute] device`): the CPU,
-/// or a GPU opened once. Settings the GPU refuses (`GpuError::Unsupported`, e.g. a side with a
-/// prime factor above 5) run on the CPU, and their rows say so.
-pub struct Device {
-    #[cfg(feature = "gpu")]
-    pub gpu: Option<specmux_gpu::GpuContext>,
-}
-
-impl Device {
-    pub fn cpu() -> Device {
-        Device {
-            #[cfg(feature = "gpu")]
-            gpu: None,
-        }
-    }
-
-    /// Open what `device` names: `gpu` is an error without an adapter or without the `gpu`
-    /// feature; `auto` stays on the CPU there and says so in one line. `file` names the
-    /// experiment (or the command line) for the error.
-    pub fn open(device: ComputeDevice, file: &str) -> Result<Device> {
-        #[cfg(feature = "gpu")]
-        {
-            let _ = file;
-            let gpu =
-                specmux_gpu::backend::open(device).map_err(|e| Error::Numerical(e.to_string()))?;
-            Ok(Device { gpu })
-        }
-        #[cfg(not(feature = "gpu"))]
-        match device {
-            ComputeDevice::Cpu => Ok(Device::cpu()),
-            ComputeDevice::Gpu => Err(ComputeDevice::not_built(file)),
-            ComputeDevice::Auto => {
-                eprintln!(
-                    "compute device auto: built without the gpu feature; reconstructing on the CPU"
-                );
-                Ok(Device::cpu())
-            }
-        }
-    }
-
-    /// The work–precision table `method = "auto"` reads on this device: the GPU's for a
-    /// hardware adapter, else the CPU's (a software adapter is slower than the CPU path).
-    pub fn auto_table(&self) -> specmux_core::auto::Table<'static> {
-        match self.is_hardware_gpu() {
-            true => specmux_core::auto::GPU,
-            false => specmux_core::auto::CPU,
-        }
-    }
-
-    /// A GPU that is not a software adapter (lavapipe emulates one on the CPU, slower than
-    /// the CPU path).
-    pub fn is_hardware_gpu(&self) -> bool {
-        #[cfg(feature = "gpu")]
-        if let Some(ctx) = &self.gpu {
-            return !ctx.is_software();
-        }
-        false
-    }
-
-    /// "CPU, N threads", or "GPU NAME (backend, type)" flagged when the adapter is software.
-    pub fn describe(&self) -> String {
-        #[cfg(feature = "gpu")]
-        if let Some(ctx) = &self.gpu {
-            let software = if ctx.is_software() {
-                " — a software adapter: its times are a CPU emulating a GPU, not a GPU's"
-            } else {
-                ""
-            };
-            return format!("GPU {}{software}", ctx.adapter_name());
-        }
-        format!("CPU, {} threads", rayon::current_num_threads())
-    }
-
-    /// `describe` short enough for a plot's title: the adapter's name up to its first
-    /// parenthesis, and "software" for a software adapter.
-    pub fn short(&self) -> String {
-        #[cfg(feature = "gpu")]
-        if let Some(ctx) = &self.gpu {
-            let name = ctx.name().split(" (").next().unwrap_or("");
-            return match ctx.is_software() {
-                true => format!("GPU {name} (software: not a GPU's speed)"),
-                false => format!("GPU {name}"),
-            };
-        }
-        self.describe()
-    }
-}
-
 /// One setting's reconstruction on the device it runs on.
 enum Runner {
     Cpu(Box<Reconstructor>),
-    /// The GPU (a handle to the one `Device` opened), its chain and the cube it reads back
+    /// The GPU (a handle to the one `OpenDevice` opened), its chain and the cube it reads back
     /// into, kept across repeats.
     #[cfg(feature = "gpu")]
     Gpu(
@@ -363,9 +276,9 @@ type Timed = (f64, [f64; 3], Option<(Cube, Cube)>);
 
 impl Runner {
     /// The GPU runner where `device` has a GPU and the setting a GPU kernel, else the CPU's.
-    fn new(device: &Device, recon: Reconstructor) -> Result<Runner> {
+    fn new(device: &OpenDevice, recon: Reconstructor) -> Result<Runner> {
         #[cfg(feature = "gpu")]
-        if let Some(ctx) = &device.gpu {
+        if let Some(ctx) = device.gpu() {
             use specmux_gpu::{GpuError, GpuReconstructor};
             match GpuReconstructor::new(ctx, &recon) {
                 Ok(g) => {
@@ -418,7 +331,7 @@ impl Runner {
 pub struct BenchRow {
     pub label: String,
     pub setting: Setting,
-    /// Where it ran: "cpu" or "gpu" (`Device::describe` names the adapter).
+    /// Where it ran: "cpu" or "gpu" (`OpenDevice::describe` names the adapter).
     pub device: String,
     /// Final cube r̂ against the true cube.
     pub psnr_db: f64,
@@ -512,12 +425,12 @@ fn reconstructor(sim: &Simulated, s: &Setting) -> Result<Reconstructor> {
 /// Reconstruct `sim`'s frame with every setting `repeats` times (the repeats interleaved over
 /// the settings, so that a change of machine load spreads over all of them) and measure it.
 pub fn work_precision(sim: &Simulated, grid: &[Setting], repeats: usize) -> Result<Vec<BenchRow>> {
-    work_precision_on(&Device::cpu(), sim, grid, repeats)
+    work_precision_on(&OpenDevice::cpu(), sim, grid, repeats)
 }
 
 /// `work_precision` on `device`: each setting that has a GPU kernel runs there.
 pub fn work_precision_on(
-    device: &Device,
+    device: &OpenDevice,
     sim: &Simulated,
     grid: &[Setting],
     repeats: usize,
@@ -1284,7 +1197,7 @@ mod tests {
             why.contains("reconstruct.gap.levels") && why.contains("40×40"),
             "{why}"
         );
-        let grid = grid_for(&odd, &Device::cpu());
+        let grid = grid_for(&odd, &OpenDevice::cpu());
         let kept = |m: Method| grid.iter().filter(|s| s.method == m).count();
         let all = |m: Method| default_grid().iter().filter(|s| s.method == m).count();
         assert_eq!(kept(Method::Gap), 0);
@@ -1299,11 +1212,11 @@ mod tests {
     #[test]
     fn a_rig_with_a_camera_adds_the_noise_aware_joint_rows() {
         let sim = tiny();
-        assert_eq!(grid_for(&sim, &Device::cpu()), default_grid());
+        assert_eq!(grid_for(&sim, &OpenDevice::cpu()), default_grid());
         let mut exp = sim.exp.clone();
         exp.rig.sensor = Some(Default::default());
         let noisy = simulate(&exp, &Library::default_root()).unwrap();
-        let grid = grid_for(&noisy, &Device::cpu());
+        let grid = grid_for(&noisy, &OpenDevice::cpu());
         let extra = &grid[default_grid().len()..];
         assert_eq!(extra.len(), 6);
         assert_eq!(
@@ -1385,40 +1298,25 @@ mod tests {
         ));
     }
 
-    #[cfg(not(feature = "gpu"))]
-    #[test]
-    fn without_the_gpu_feature_gpu_is_refused_and_auto_stays_on_the_cpu() {
-        let e = Device::open(ComputeDevice::Gpu, "x.toml")
-            .err()
-            .unwrap()
-            .to_string();
-        assert!(
-            e.contains("x.toml") && e.contains("compute.device") && e.contains("--features gpu"),
-            "{e}"
-        );
-        let auto = Device::open(ComputeDevice::Auto, "x.toml").unwrap();
-        assert!(auto.describe().starts_with("CPU"));
-        assert_eq!(auto.auto_table(), specmux_core::auto::CPU);
-    }
-
     /// On a GPU (lavapipe counts), every setting, the joint method included, runs there and
     /// gives the CPU's error (issue 17: within 0.01 dB).
     #[cfg(feature = "gpu")]
     #[test]
     fn on_a_gpu_the_rows_say_where_they_ran_and_match_the_cpu() {
-        let device = match Device::open(ComputeDevice::Gpu, "t") {
+        use specmux_core::reconstructor::ComputeDevice;
+        let device = match OpenDevice::open(ComputeDevice::Gpu) {
             Ok(d) => d,
             Err(e) => return eprintln!("{e}: GPU test skipped"),
         };
         // `auto` reads the GPU's table on a hardware adapter only (lavapipe is slower than the
         // CPU path), the CPU's on the CPU.
-        let software = device.gpu.as_ref().is_some_and(|c| c.is_software());
+        let software = device.gpu().is_some_and(|c| c.is_software());
         let want = match software {
             true => specmux_core::auto::CPU,
             false => specmux_core::auto::GPU,
         };
         assert_eq!(device.auto_table(), want);
-        assert_eq!(Device::cpu().auto_table(), specmux_core::auto::CPU);
+        assert_eq!(OpenDevice::cpu().auto_table(), specmux_core::auto::CPU);
         let sim = tiny();
         let grid = [
             Setting::new(Method::Fourier, 0),

@@ -8,6 +8,7 @@ use specmux_core::unmix::UnmixStats;
 use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
+use specmux_twin::device::OpenDevice;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
@@ -100,7 +101,7 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
 /// de-alias (GAP, GAP-TV) and crosstalk mix, unmix, or the joint method's seed and iterations;
 /// `auto` without an adapter stays on the CPU and says so in one line.
 fn reconstruct_on_device(
-    device: &crate::bench::Device,
+    device: &OpenDevice,
     recon: &Reconstructor,
     frame: &Cube,
 ) -> Result<DeviceRun> {
@@ -131,11 +132,11 @@ struct DeviceRun {
 /// The GPU's chain (specmux-gpu), or None where the device is the CPU.
 #[cfg(feature = "gpu")]
 fn gpu_reconstruct(
-    device: &crate::bench::Device,
+    device: &OpenDevice,
     recon: &Reconstructor,
     frame: &Cube,
 ) -> Result<Option<DeviceRun>> {
-    let Some(ctx) = &device.gpu else {
+    let Some(ctx) = device.gpu() else {
         return Ok(None);
     };
     let t = std::time::Instant::now();
@@ -161,13 +162,9 @@ fn gpu_reconstruct(
     }))
 }
 
-/// Without the `gpu` feature the device is the CPU (`Device::open` refused `gpu`).
+/// Without the `gpu` feature the device is the CPU (`OpenDevice::open` refused `gpu`).
 #[cfg(not(feature = "gpu"))]
-fn gpu_reconstruct(
-    _: &crate::bench::Device,
-    _: &Reconstructor,
-    _: &Cube,
-) -> Result<Option<DeviceRun>> {
+fn gpu_reconstruct(_: &OpenDevice, _: &Reconstructor, _: &Cube) -> Result<Option<DeviceRun>> {
     Ok(None)
 }
 
@@ -260,8 +257,8 @@ pub fn bench(
     let exp = experiment_for(scene, size)?;
     let sim = crate::bench::simulate(&exp, lib)?;
     let device = match device {
-        Some(d) => crate::bench::Device::open(d, "--device")?,
-        None => crate::bench::Device::open(exp.compute.device, &exp.file)?,
+        Some(d) => OpenDevice::open(d).map_err(|e| e.in_file("--device"))?,
+        None => OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?,
     };
     say!(
         text,
@@ -742,7 +739,7 @@ pub fn reconstruct(
     let cache = PatternCache::from_env()?;
     let cal = frame_calibration(&exp, &rig, &materials, measured, cache.as_ref())?;
     say!(text, "calibration: {}", cal.source);
-    let device = crate::bench::Device::open(exp.compute.device, &exp.file)?;
+    let device = OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?;
     let design = rig.design();
     let table = device.auto_table();
     let recon = Reconstructor::for_device(&exp.reconstruct, &design, &cal, &exp.file, table)?;

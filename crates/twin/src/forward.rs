@@ -136,6 +136,9 @@ pub struct Pipeline {
     timing: Option<TimingStage>,
     multiplex: MultiplexStage,
     sensor: Option<SensorStage>,
+    /// `[compute] device`, opened once: the multiplex and the relay hold its context, and the
+    /// run's reconstruction ([`crate::run::run_in`]) uses it too.
+    device: OpenDevice,
 }
 
 /// How the patterns are made.
@@ -212,7 +215,13 @@ impl Pipeline {
                 }),
                 None => None,
             },
+            device,
         })
+    }
+
+    /// The device `[compute] device` named, as opened for this pipeline.
+    pub fn device(&self) -> &OpenDevice {
+        &self.device
     }
 
     /// The pipeline with its imaged patterns kept in `cache` (None, as built: none; the command

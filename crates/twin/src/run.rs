@@ -2,6 +2,7 @@
 //! gathers every figure with its wall time into one report.
 
 use crate::captures::{self, CaptureConfig, KeptCaptures, WhiteTarget};
+use crate::device::OpenDevice;
 use crate::experiment::Experiment;
 use crate::forward::{kept_or_made, Pipeline, Simulated, StageTime};
 use crate::pattern_cache::PatternCache;
@@ -9,6 +10,7 @@ use crate::rig::Rig;
 use crate::scene::Materials;
 use crate::sensor::Sensor;
 use serde::Serialize;
+use specmux_core::auto;
 use specmux_core::calibration::{self, Calibration, CalibrationFrames, MeasuredCarrier};
 use specmux_core::crosstalk::{self, ErrorBudget};
 use specmux_core::demux::{Demux, SUPER_GAUSSIAN_ORDER};
@@ -196,6 +198,9 @@ pub struct RunReport {
     pub setup_seconds: f64,
     /// Per frame: calibration, demultiplexing, crosstalk, de-aliasing and unmixing.
     pub reconstruction_seconds: f64,
+    /// Where the frame was reconstructed (`[compute] device`): "CPU, N threads" or "GPU NAME
+    /// (…)"; a method without a GPU kernel says so.
+    pub reconstruction_device: String,
     pub total_seconds: f64,
 }
 
@@ -229,8 +234,20 @@ pub fn reconstructor(
     sim: &Simulated,
     cache: Option<&PatternCache>,
 ) -> Result<Reconstructor> {
+    reconstructor_for(exp, rig, sim, cache, auto::CPU)
+}
+
+/// [`reconstructor`] whose `method = "auto"` picks from `table` (the device's,
+/// [`OpenDevice::auto_table`]).
+pub fn reconstructor_for(
+    exp: &Experiment,
+    rig: &Rig,
+    sim: &Simulated,
+    cache: Option<&PatternCache>,
+    table: auto::Table<'_>,
+) -> Result<Reconstructor> {
     let cal = calibration(exp, rig, sim, cache)?;
-    Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)
+    Reconstructor::for_device(&exp.reconstruct, &rig.design(), &cal, &exp.file, table)
 }
 
 /// The calibration frames the twin captures for this rig (`[calibration]`), read from `cache`
@@ -341,9 +358,10 @@ pub fn run_in(
         ));
     }
     let t = Instant::now();
-    let recon = reconstructor(exp, &rig, &sim, cache)?;
+    let device = pipeline.device();
+    let recon = reconstructor_for(exp, &rig, &sim, cache, device.auto_table())?;
     let t_setup = t.elapsed().as_secs_f64();
-    let out = recon.run(&sim.frame, Some(&sim.exposed))?;
+    let (out, reconstruction_device) = reconstruct_on(device, &recon, &sim)?;
     let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;
     let saturation = match &exp.rig.sensor {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
@@ -377,6 +395,7 @@ pub fn run_in(
         error_budget,
         setup_seconds: t_setup,
         reconstruction_seconds: t_demux + t_gap + t_unmix,
+        reconstruction_device,
         total_seconds: t_all.elapsed().as_secs_f64(),
     };
     let data = RunData {
@@ -387,6 +406,66 @@ pub fn run_in(
         cube: out.cube,
     };
     Ok((report, data))
+}
+
+/// One frame's reconstruction on `device`, and where it ran: the GPU's (feature `gpu`) where
+/// the device is one and the method has a GPU kernel, else the CPU's.
+fn reconstruct_on(
+    device: &OpenDevice,
+    recon: &Reconstructor,
+    sim: &Simulated,
+) -> Result<(Reconstruction, String)> {
+    #[cfg(feature = "gpu")]
+    if let Some(ctx) = device.gpu() {
+        match on_gpu(ctx, recon, &sim.frame)? {
+            Some(out) => return Ok((out, device.describe())),
+            None => {
+                let cpu = OpenDevice::cpu().describe();
+                let out = recon.run(&sim.frame, Some(&sim.exposed))?;
+                return Ok((out, format!("{cpu}: the method has no GPU kernel")));
+            }
+        }
+    }
+    let out = recon.run(&sim.frame, Some(&sim.exposed))?;
+    Ok((out, device.describe()))
+}
+
+/// The reconstruction on the GPU, None where the method has no GPU kernel (plug-and-play).
+/// Three submissions, each from the raw frame: x̂, the de-aliased channels, then the whole
+/// chain with the cube read back, whose time is the frame's; each stage's seconds are the
+/// difference between the runs that end after it and before it.
+#[cfg(feature = "gpu")]
+fn on_gpu(
+    ctx: &specmux_gpu::GpuContext,
+    recon: &Reconstructor,
+    frame: &Cube,
+) -> Result<Option<Reconstruction>> {
+    use specmux_gpu::{GpuError, GpuReconstructor};
+    let g = match GpuReconstructor::new(ctx, recon) {
+        Ok(g) => g,
+        Err(GpuError::Unsupported(_)) => return Ok(None),
+        Err(e) => return Err(e.into()),
+    };
+    let t = Instant::now();
+    let xhat = g.demultiplex(ctx, frame)?;
+    let t_demux = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (xgap, gap) = g.dealias(ctx, frame)?;
+    let t_dealias = t.elapsed().as_secs_f64();
+    let mut cube = g.output_cube();
+    let t = Instant::now();
+    let run = g.run_into(ctx, frame, &mut cube)?;
+    let t_all = t.elapsed().as_secs_f64();
+    let t_gap = (t_dealias - t_demux).max(0.0);
+    Ok(Some(Reconstruction {
+        xhat,
+        xgap,
+        cube,
+        gap,
+        joint: run.joint,
+        unmix: run.unmix,
+        seconds: [t_demux, t_gap, (t_all - t_demux - t_gap).max(0.0)],
+    }))
 }
 
 /// The rig's warnings, its calibration's, the frame's, the joint run's, then every result row's
@@ -601,8 +680,11 @@ impl RunReport {
             );
         }
         s += &format!(
-            "reconstructor set-up {:.4}s, reconstruction {:.4}s, total {:.2}s\n",
-            self.setup_seconds, self.reconstruction_seconds, self.total_seconds
+            "reconstructor set-up {:.4}s, reconstruction {:.4}s ({}), total {:.2}s\n",
+            self.setup_seconds,
+            self.reconstruction_seconds,
+            self.reconstruction_device,
+            self.total_seconds
         );
         if let Some(a) = &self.auto {
             s += &format!("auto: {}\n", a.reason);
@@ -714,5 +796,54 @@ mod tests {
         assert_eq!(stats.saturated_pixels, 3);
         assert_eq!(flagged.iter().filter(|&&s| s).count(), 3);
         assert_eq!(FrameStats::of(&raw, None, None).saturated_pixels, 0);
+    }
+}
+
+#[cfg(all(test, feature = "gpu"))]
+mod gpu_tests {
+    use super::*;
+    use crate::forward::gpu_tests::context;
+
+    /// The report of a 64² dead-leaves run with `method` and `[compute] device`.
+    fn report(method: &str, prior: &str, device: &str) -> RunReport {
+        let toml = format!(
+            "[scene]\nsize = [64, 64]\n[reconstruct.gap]\nmethod = \"{method}\"\n\
+             [reconstruct.joint]\niterations = 10\nprior = \"{prior}\"\n\
+             [compute]\ndevice = \"{device}\"\n"
+        );
+        let exp = Experiment::from_toml(&toml, "t.toml").unwrap();
+        run_in(&exp, &Library::default_root(), None).unwrap().0
+    }
+
+    /// `[compute] device = "gpu"` reconstructs the run's frame on the GPU, every stage's row
+    /// within 0.01 dB of the CPU's (the GPU chain's bound, issue 17), and says where; the
+    /// plug-and-play prior, which has no GPU kernel, runs on the CPU and says that.
+    #[test]
+    fn a_run_reconstructs_on_the_device_its_experiment_names() {
+        if context().is_none() {
+            return;
+        }
+        for method in ["fourier", "gap", "gap-tv", "joint"] {
+            let cpu = report(method, "tv", "cpu");
+            let gpu = report(method, "tv", "gpu");
+            assert!(cpu.reconstruction_device.starts_with("CPU"));
+            assert!(
+                gpu.reconstruction_device.starts_with("GPU"),
+                "{method}: {}",
+                gpu.reconstruction_device
+            );
+            for row in [Row::Demultiplexed, Row::Dealiased, Row::Cube] {
+                let (c, g) = (cpu.row(row).psnr_db, gpu.row(row).psnr_db);
+                eprintln!("{method} {row:?}: CPU {c:.4} dB, GPU {g:.4} dB");
+                assert!((c - g).abs() < 0.01, "{method} {row:?}: {c} against {g}");
+            }
+        }
+        let pnp = report("joint", "pnp", "gpu");
+        assert!(
+            pnp.reconstruction_device.starts_with("CPU")
+                && pnp.reconstruction_device.contains("no GPU kernel"),
+            "{}",
+            pnp.reconstruction_device
+        );
     }
 }
