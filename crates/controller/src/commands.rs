@@ -18,6 +18,7 @@ use specmux_core::calibration::{Calibration, CalibrationFrames};
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
+use specmux_twin::device::{DeviceReconstructor, OpenDevice};
 use specmux_twin::{Experiment, Rig};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -97,7 +98,9 @@ struct Rehearsal<'a> {
     sim: SimRig,
     exp: &'a Experiment,
     rig: Rig,
-    recon: Option<Reconstructor>,
+    /// `[compute] device`, which the frames are reconstructed on.
+    device: OpenDevice,
+    recon: Option<DeviceReconstructor>,
     rows: Vec<ReconstructedFrame>,
     /// Each frame's cube, when the caller keeps them (Python's `rehearse(cubes=True)`).
     cubes: Option<Vec<Cube>>,
@@ -111,12 +114,14 @@ impl Sink for Rehearsal<'_> {
         self.recorder.calibrated(f, records)?;
         let cal =
             Calibration::from_frames(&self.rig.carriers, f, self.exp.calibration.search_bins)?;
-        self.recon = Some(Reconstructor::new(
+        let recon = Reconstructor::for_device(
             &self.exp.reconstruct,
             &self.rig.design(),
             &cal,
             &self.exp.file,
-        )?);
+            self.device.auto_table(),
+        )?;
+        self.recon = Some(DeviceReconstructor::new(&self.device, recon)?);
         Ok(())
     }
 
@@ -124,7 +129,7 @@ impl Sink for Rehearsal<'_> {
         self.recorder.frame(r, frame)?;
         let recon = self
             .recon
-            .as_ref()
+            .as_mut()
             .ok_or_else(|| Error::device("controller", "a frame before the calibration"))?;
         let f = RecordedFrame {
             frame_id: r.frame_id,
@@ -235,6 +240,8 @@ pub struct Rehearsed {
     pub wall_s: f64,
     /// What the acquired calibration warns of (carriers that do not stand out of their captures).
     pub warning: Option<String>,
+    /// Where the frames were reconstructed ("CPU, 2 threads", "GPU NAME (…)").
+    pub reconstructed_on: String,
 }
 
 impl Rehearsed {
@@ -242,7 +249,7 @@ impl Rehearsed {
     /// them after the plan.
     pub fn text(&self) -> String {
         let warning = (self.warning.iter()).map(|w| format!("warning: {w}\n"));
-        frame_table(&self.rows)
+        frame_table(&self.rows, &self.reconstructed_on)
             + &warning.collect::<String>()
             + &outcome_text(&self.outcome, Some(self.virtual_s), self.wall_s)
     }
@@ -269,6 +276,7 @@ pub fn rehearsal(
         sim: sim.clone(),
         exp,
         rig,
+        device: OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?,
         recon: None,
         rows: Vec::new(),
         cubes: keep_cubes.then(Vec::new),
@@ -289,7 +297,11 @@ pub fn rehearsal(
         events,
         virtual_s: sim.now_s(),
         wall_s: wall.elapsed().as_secs_f64(),
-        warning: sink.recon.as_ref().and_then(|r| r.calibration.warning()),
+        warning: (sink.recon.as_ref()).and_then(|r| r.reconstructor().calibration.warning()),
+        reconstructed_on: match &sink.recon {
+            Some(r) => r.describe().to_string(),
+            None => sink.device.describe(),
+        },
     })
 }
 

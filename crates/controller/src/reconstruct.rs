@@ -16,10 +16,10 @@ use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_io::exr;
 use specmux_io::output_set::OutputSet;
+use specmux_twin::device::{DeviceReconstructor, OpenDevice};
 use specmux_twin::scene::{build_at, Materials};
 use specmux_twin::{Experiment, Rig};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// One reconstructed frame: its time, flags, reconstruction time and, with a truth, its error.
 #[derive(Clone, Debug, Serialize)]
@@ -46,14 +46,13 @@ pub struct RecordedFrame {
 
 /// Reconstruct one frame, timed, and compare it with `truth` when there is one.
 pub fn reconstruct_frame(
-    recon: &Reconstructor,
+    recon: &mut DeviceReconstructor,
     f: &RecordedFrame,
     truth: Option<&Cube>,
 ) -> Result<(Cube, ReconstructedFrame)> {
-    let mean_snr = recon.frame_snr(&f.raw)?;
-    let t = Instant::now();
-    let cube = recon.run(&f.raw, None)?.cube;
-    let reconstruction_s = t.elapsed().as_secs_f64();
+    let mean_snr = recon.reconstructor().frame_snr(&f.raw)?;
+    let run = recon.run(&f.raw, false)?;
+    let (cube, reconstruction_s) = (run.cube, run.seconds);
     let m = truth.map(|t| metrics::compare(t, &cube)).transpose()?;
     let row = ReconstructedFrame {
         frame_id: f.frame_id,
@@ -139,8 +138,8 @@ fn dim_frames_warning(rows: &[ReconstructedFrame]) -> String {
 /// The table of per-frame results (the SNR column: `Reconstructor::frame_snr`), a warning for
 /// frames under their noise, and a summary line of the clean frames. "-" marks a figure the
 /// frame has nothing for (no truth, no noise model); "undefined" a SAM with a truth but no
-/// non-zero spectrum to measure.
-pub fn frame_table(rows: &[ReconstructedFrame]) -> String {
+/// non-zero spectrum to measure. `place`: where the frames were reconstructed.
+pub fn frame_table(rows: &[ReconstructedFrame], place: &str) -> String {
     let absent = || "-".to_string();
     let mut t = format!(
         "{:>6} {:>10} {:>6} {:>9} {:>7} {:>9} {:>9} {:>7}\n",
@@ -186,7 +185,7 @@ pub fn frame_table(rows: &[ReconstructedFrame]) -> String {
             metrics::show(mean(clean.iter().filter_map(|r| r.sam_deg).collect()), 2),
         );
     }
-    t += &format!("reconstruction {time:.4} s/frame\n");
+    t += &format!("reconstruction {time:.4} s/frame ({place})\n");
     t
 }
 
@@ -205,7 +204,10 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
     let rig = Rig::build(&exp, lib, &Materials::load(lib)?)?;
     let frames_cal = record::read_calibration(dir)?;
     let cal = Calibration::from_frames(&rig.carriers, &frames_cal, exp.calibration.search_bins)?;
-    let recon = Reconstructor::new(&exp.reconstruct, &rig.design(), &cal, &exp.file)?;
+    let device = OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?;
+    let table = device.auto_table();
+    let recon = Reconstructor::for_device(&exp.reconstruct, &rig.design(), &cal, &exp.file, table)?;
+    let mut recon = DeviceReconstructor::new(&device, recon)?;
     let frames = recorded_frames(dir)?;
     let truths = Truths::read(dir, lib)?;
     let names = band_names(&exp)?;
@@ -216,7 +218,7 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
             Some(t) => t.of(&exp, f.frame_id)?,
             None => None,
         };
-        let (cube, row) = reconstruct_frame(&recon, f, truth.as_ref())?;
+        let (cube, row) = reconstruct_frame(&mut recon, f, truth.as_ref())?;
         exr::write(
             &files.path(&format!("cube-{:06}.exr", f.frame_id)),
             &cube,
@@ -231,7 +233,7 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
         rows.len(),
         dir.join("calibration.ome.tif").display()
     );
-    text += &frame_table(&rows);
+    text += &frame_table(&rows, recon.describe());
     if let Some(w) = cal.warning() {
         text += &format!("warning: {w}\n");
     }
@@ -314,7 +316,7 @@ mod tests {
             row(3, None),
             row(4, Some(0.3)),
         ];
-        let t = frame_table(&rows);
+        let t = frame_table(&rows, "CPU");
         assert!(t.lines().next().unwrap().ends_with("SNR"), "{t}");
         let warning: Vec<&str> = t.lines().filter(|l| l.starts_with("warning:")).collect();
         assert_eq!(warning.len(), 1, "{t}");
@@ -323,7 +325,7 @@ mod tests {
                 && warning[0].contains("0.30 times its noise"),
             "{t}"
         );
-        assert!(!frame_table(&rows[1..3]).contains("warning"));
+        assert!(!frame_table(&rows[1..3], "CPU").contains("warning"));
     }
 
     /// Without a truth or a noise model the figures are "-"; with a truth a SAM over zero
@@ -331,7 +333,7 @@ mod tests {
     #[test]
     fn absent_figures_are_dashes_and_an_undefined_angle_says_so() {
         let cells = |r: &ReconstructedFrame| -> Vec<String> {
-            let t = frame_table(std::slice::from_ref(r));
+            let t = frame_table(std::slice::from_ref(r), "CPU");
             t.lines()
                 .nth(1)
                 .unwrap()

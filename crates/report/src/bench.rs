@@ -22,7 +22,7 @@ use specmux_core::metrics;
 use specmux_core::reconstructor::Reconstructor;
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
-use specmux_twin::device::OpenDevice;
+use specmux_twin::device::{DeviceReconstructor, OpenDevice};
 use specmux_twin::experiment::Experiment;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::pattern_cache::PatternCache;
@@ -257,75 +257,6 @@ fn default_rounds(iterations: usize, prior: Prior, noise: NoiseAware) -> usize {
     joint::default_rounds(iterations, prior, weight_rule)
 }
 
-/// One setting's reconstruction on the device it runs on.
-enum Runner {
-    Cpu(Box<Reconstructor>),
-    /// The GPU (a handle to the one `OpenDevice` opened), its chain and the cube it reads back
-    /// into, kept across repeats.
-    #[cfg(feature = "gpu")]
-    Gpu(
-        specmux_gpu::GpuContext,
-        Box<specmux_gpu::GpuReconstructor>,
-        Cube,
-    ),
-}
-
-/// What one timed run gives: total seconds, seconds of each stage (NaN where the device does
-/// not time them apart: the GPU runs them in one submission), and (x after de-aliasing, cube).
-type Timed = (f64, [f64; 3], Option<(Cube, Cube)>);
-
-impl Runner {
-    /// The GPU runner where `device` has a GPU and the setting a GPU kernel, else the CPU's.
-    fn new(device: &OpenDevice, recon: Reconstructor) -> Result<Runner> {
-        #[cfg(feature = "gpu")]
-        if let Some(ctx) = device.gpu() {
-            use specmux_gpu::{GpuError, GpuReconstructor};
-            match GpuReconstructor::new(ctx, &recon) {
-                Ok(g) => {
-                    let cube = g.output_cube();
-                    return Ok(Runner::Gpu(ctx.clone(), Box::new(g), cube));
-                }
-                Err(GpuError::Unsupported(_)) => {}
-                Err(e) => return Err(Error::Numerical(e.to_string())),
-            }
-        }
-        let _ = device;
-        Ok(Runner::Cpu(Box::new(recon)))
-    }
-
-    fn device(&self) -> &'static str {
-        match self {
-            Runner::Cpu(_) => "cpu",
-            #[cfg(feature = "gpu")]
-            Runner::Gpu(..) => "gpu",
-        }
-    }
-
-    /// One run on `frame`, timed from the frame in host memory to the cube in host memory
-    /// (uploads and read-backs included); with `keep`, its outputs too.
-    fn run(&mut self, frame: &Cube, keep: bool) -> Result<Timed> {
-        match self {
-            Runner::Cpu(r) => {
-                let out = r.run(frame, None)?;
-                let kept = keep.then_some((out.xgap, out.cube));
-                Ok((out.seconds.iter().sum(), out.seconds, kept))
-            }
-            #[cfg(feature = "gpu")]
-            Runner::Gpu(ctx, g, cube) => {
-                let gpu = |e: specmux_gpu::GpuError| Error::Numerical(e.to_string());
-                let t = std::time::Instant::now();
-                g.run_into(ctx, frame, cube).map_err(gpu)?;
-                let seconds = t.elapsed().as_secs_f64();
-                let kept = match keep {
-                    true => Some((g.dealias(ctx, frame).map_err(gpu)?.0, cube.clone())),
-                    false => None,
-                };
-                Ok((seconds, [f64::NAN; 3], kept))
-            }
-        }
-    }
-}
-
 /// One row of the work–precision table.
 #[derive(Clone, Debug, Serialize)]
 pub struct BenchRow {
@@ -445,7 +376,7 @@ pub fn work_precision_on(
     }
     let mut runners = grid
         .iter()
-        .map(|s| Runner::new(device, reconstructor(sim, s)?))
+        .map(|s| DeviceReconstructor::new(device, reconstructor(sim, s)?))
         .collect::<Result<Vec<_>>>()?;
     let mut times = vec![Vec::with_capacity(repeats); grid.len()];
     let mut stages = vec![[(); 3].map(|_| Vec::with_capacity(repeats)); grid.len()];
@@ -455,19 +386,20 @@ pub fn work_precision_on(
     for _ in 0..repeats {
         for (k, r) in runners.iter_mut().enumerate() {
             crate::progress::step(&bar, "the work–precision runs")?;
-            let (total, seconds, kept) = r.run(&sim.frame, outputs[k].is_none())?;
-            times[k].push(total);
-            for (v, d) in stages[k].iter_mut().zip(seconds) {
+            // Timed from the frame in host memory to the cube in host memory.
+            let run = r.run(&sim.frame, outputs[k].is_none())?;
+            times[k].push(run.seconds);
+            for (v, d) in stages[k].iter_mut().zip(run.stage_seconds) {
                 v.push(d);
             }
-            if kept.is_some() {
-                outputs[k] = kept;
+            if let Some(x) = run.dealiased {
+                outputs[k] = Some((x, run.cube));
             }
         }
     }
     bar.finish_and_clear();
     let mut rows = Vec::with_capacity(grid.len());
-    let devices = runners.iter().map(Runner::device);
+    let devices = runners.iter().map(DeviceReconstructor::device);
     for ((((s, t), st), out), device) in
         grid.iter().zip(times).zip(stages).zip(outputs).zip(devices)
     {

@@ -8,7 +8,7 @@ use specmux_core::unmix::UnmixStats;
 use specmux_core::{Cube, Error, Result};
 use specmux_io::exr as exr_io;
 use specmux_io::output_set::OutputSet;
-use specmux_twin::device::OpenDevice;
+use specmux_twin::device::{DeviceReconstructor, FrameRun, OpenDevice};
 use specmux_twin::experiment::Experiment;
 use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::rig::Rig;
@@ -96,76 +96,37 @@ fn resize(exp: &mut Experiment, n: usize) -> Result<()> {
     ))
 }
 
-/// One frame's cube and unmixing counters on the device `[compute] device` names, with a line
-/// of stage times. The GPU (feature `gpu`) runs the whole chain of every method: demultiplex,
-/// de-alias (GAP, GAP-TV) and crosstalk mix, unmix, or the joint method's seed and iterations;
-/// `auto` without an adapter stays on the CPU and says so in one line.
+/// One frame's reconstruction on `device` (the GPU's whole chain, every method with a kernel),
+/// and a line of its stage times and where it ran.
 fn reconstruct_on_device(
     device: &OpenDevice,
-    recon: &Reconstructor,
+    recon: Reconstructor,
     frame: &Cube,
-) -> Result<DeviceRun> {
-    if let Some(done) = gpu_reconstruct(device, recon, frame)? {
-        return Ok(done);
-    }
-    let r = recon.run(frame, None)?;
-    let [t_demux, t_gap, t_unmix] = r.seconds;
-    Ok(DeviceRun {
-        cube: r.cube,
-        unmix: r.unmix,
-        joint: r.joint,
-        times: format!(
-            "CPU: demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s"
-        ),
-    })
-}
-
-/// One frame's reconstruction on a device: the cube, the unmixing's counters, the joint
-/// method's run (None for the other methods) and a line of stage times.
-struct DeviceRun {
-    cube: Cube,
-    unmix: UnmixStats,
-    joint: Option<specmux_core::joint::JointStats>,
-    times: String,
-}
-
-/// The GPU's chain (specmux-gpu), or None where the device is the CPU.
-#[cfg(feature = "gpu")]
-fn gpu_reconstruct(
-    device: &OpenDevice,
-    recon: &Reconstructor,
-    frame: &Cube,
-) -> Result<Option<DeviceRun>> {
-    let Some(ctx) = device.gpu() else {
-        return Ok(None);
-    };
+) -> Result<(FrameRun, String)> {
     let t = std::time::Instant::now();
-    let g = specmux_gpu::GpuReconstructor::new(ctx, recon)?;
+    let mut on_device = DeviceReconstructor::new(device, recon)?;
     let t_setup = t.elapsed().as_secs_f64();
-    let mut cube = g.output_cube();
-    let t = std::time::Instant::now();
-    let run = g.run_into(ctx, frame, &mut cube)?;
-    let iterations = run
-        .joint
-        .as_ref()
-        .map_or(run.gap.iterations, |j| j.iterations);
-    let times = format!(
-        "{}: setup {t_setup:.4} s, demultiplex + de-alias ({iterations} iterations) + unmix {:.4} s (first frame)",
-        device.describe(),
-        t.elapsed().as_secs_f64()
-    );
-    Ok(Some(DeviceRun {
-        cube,
-        unmix: run.unmix,
-        joint: run.joint,
-        times,
-    }))
-}
-
-/// Without the `gpu` feature the device is the CPU (`OpenDevice::open` refused `gpu`).
-#[cfg(not(feature = "gpu"))]
-fn gpu_reconstruct(_: &OpenDevice, _: &Reconstructor, _: &Cube) -> Result<Option<DeviceRun>> {
-    Ok(None)
+    let run = on_device.run(frame, false)?;
+    let place = on_device.describe();
+    let times = match on_device.device() {
+        "gpu" => {
+            let iterations = run
+                .joint
+                .as_ref()
+                .map_or(run.gap.iterations, |j| j.iterations);
+            format!(
+                "demultiplex + de-alias ({iterations} iterations) + unmix {:.4} s, the first frame after a setup of {t_setup:.4} s ({place})",
+                run.seconds
+            )
+        }
+        _ => {
+            let [t_demux, t_gap, t_unmix] = run.stage_seconds;
+            format!(
+                "demultiplex {t_demux:.4} s, de-alias {t_gap:.4} s, unmix {t_unmix:.4} s ({place})"
+            )
+        }
+    };
+    Ok((run, times))
 }
 
 fn band_names(grid: &Grid) -> Vec<String> {
@@ -754,15 +715,15 @@ pub fn reconstruct(
     for w in &warnings {
         say!(text, "warning: {w}");
     }
-    let run = reconstruct_on_device(&device, &recon, &frame)?;
+    let auto = recon.auto.clone();
+    let (run, times) = reconstruct_on_device(&device, recon, &frame)?;
     let (cube, stats) = (run.cube, run.unmix);
     // The joint method fits α from the frame: no per-pixel unmixing ran to count.
     match stats.pixels {
-        0 => say!(text, "{}", run.times),
+        0 => say!(text, "{times}"),
         _ => say!(
             text,
-            "{} ({} pixels bound by r ≥ 0)",
-            run.times,
+            "{times} ({} pixels bound by r ≥ 0)",
             stats.bound_pixels
         ),
     }
@@ -805,7 +766,7 @@ pub fn reconstruct(
         unmix: stats,
         joint: run.joint,
         metrics,
-        auto: recon.auto.clone(),
+        auto,
         mean_snr,
         warnings,
     };

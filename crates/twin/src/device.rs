@@ -1,9 +1,14 @@
 //! The compute device `[compute] device` (or `--device`) names, opened once per run and lent to
-//! every stage that has a GPU kernel: the forward model's multiplex and relay pair sums, the
-//! reconstruction, and the work–precision bench.
+//! every stage that has a GPU kernel: the forward model's multiplex and relay pair sums, and
+//! the reconstruction ([`DeviceReconstructor`]) of runs, `reconstruct`, recordings and the
+//! work–precision bench.
 
 use specmux_core::error::Result;
 use specmux_core::reconstructor::ComputeDevice;
+
+mod reconstructor;
+
+pub use reconstructor::{DeviceReconstructor, FrameRun};
 
 /// The device a run computes on: the CPU, or one GPU context its GPU stages share.
 pub struct OpenDevice {

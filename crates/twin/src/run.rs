@@ -2,7 +2,7 @@
 //! gathers every figure with its wall time into one report.
 
 use crate::captures::{self, CaptureConfig, KeptCaptures, WhiteTarget};
-use crate::device::OpenDevice;
+use crate::device::DeviceReconstructor;
 use crate::experiment::Experiment;
 use crate::forward::{kept_or_made, Pipeline, Simulated, StageTime};
 use crate::pattern_cache::PatternCache;
@@ -360,9 +360,12 @@ pub fn run_in(
     let t = Instant::now();
     let device = pipeline.device();
     let recon = reconstructor_for(exp, &rig, &sim, cache, device.auto_table())?;
+    let mut on_device = DeviceReconstructor::new(device, recon)?;
     let t_setup = t.elapsed().as_secs_f64();
-    let (out, reconstruction_device) = reconstruct_on(device, &recon, &sim)?;
-    let (results, channel_metrics) = result_rows(exp, &recon, &sim, &out)?;
+    let out = on_device.stages(&sim.frame, Some(&sim.exposed))?;
+    let reconstruction_device = on_device.describe().to_string();
+    let recon = on_device.reconstructor();
+    let (results, channel_metrics) = result_rows(exp, recon, &sim, &out)?;
     let saturation = match &exp.rig.sensor {
         Some(c) => Some(Sensor::new(c, rig.width, rig.height)?.saturation_dn()),
         None => None,
@@ -378,7 +381,7 @@ pub fn run_in(
     let [t_demux, t_gap, t_unmix] = out.seconds;
     let report = RunReport {
         provenance: Provenance::new(lib),
-        warnings: warnings(&rig, &recon, &frame, out.joint.as_ref(), &results),
+        warnings: warnings(&rig, recon, &frame, out.joint.as_ref(), &results),
         frame,
         results,
         experiment: exp.file.clone(),
@@ -386,8 +389,8 @@ pub fn run_in(
         size: [sim.frame.width, sim.frame.height],
         bands: sim.scene.grid.count,
         forward_stages,
-        channels: channel_rows(&rig, &recon, &channel_metrics),
-        calibration: CalibrationReport::new(&recon),
+        channels: channel_rows(&rig, recon, &channel_metrics),
+        calibration: CalibrationReport::new(recon),
         basis,
         unmix: out.unmix,
         joint: out.joint.clone(),
@@ -406,66 +409,6 @@ pub fn run_in(
         cube: out.cube,
     };
     Ok((report, data))
-}
-
-/// One frame's reconstruction on `device`, and where it ran: the GPU's (feature `gpu`) where
-/// the device is one and the method has a GPU kernel, else the CPU's.
-fn reconstruct_on(
-    device: &OpenDevice,
-    recon: &Reconstructor,
-    sim: &Simulated,
-) -> Result<(Reconstruction, String)> {
-    #[cfg(feature = "gpu")]
-    if let Some(ctx) = device.gpu() {
-        match on_gpu(ctx, recon, &sim.frame)? {
-            Some(out) => return Ok((out, device.describe())),
-            None => {
-                let cpu = OpenDevice::cpu().describe();
-                let out = recon.run(&sim.frame, Some(&sim.exposed))?;
-                return Ok((out, format!("{cpu}: the method has no GPU kernel")));
-            }
-        }
-    }
-    let out = recon.run(&sim.frame, Some(&sim.exposed))?;
-    Ok((out, device.describe()))
-}
-
-/// The reconstruction on the GPU, None where the method has no GPU kernel (plug-and-play).
-/// Three submissions, each from the raw frame: x̂, the de-aliased channels, then the whole
-/// chain with the cube read back, whose time is the frame's; each stage's seconds are the
-/// difference between the runs that end after it and before it.
-#[cfg(feature = "gpu")]
-fn on_gpu(
-    ctx: &specmux_gpu::GpuContext,
-    recon: &Reconstructor,
-    frame: &Cube,
-) -> Result<Option<Reconstruction>> {
-    use specmux_gpu::{GpuError, GpuReconstructor};
-    let g = match GpuReconstructor::new(ctx, recon) {
-        Ok(g) => g,
-        Err(GpuError::Unsupported(_)) => return Ok(None),
-        Err(e) => return Err(e.into()),
-    };
-    let t = Instant::now();
-    let xhat = g.demultiplex(ctx, frame)?;
-    let t_demux = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let (xgap, gap) = g.dealias(ctx, frame)?;
-    let t_dealias = t.elapsed().as_secs_f64();
-    let mut cube = g.output_cube();
-    let t = Instant::now();
-    let run = g.run_into(ctx, frame, &mut cube)?;
-    let t_all = t.elapsed().as_secs_f64();
-    let t_gap = (t_dealias - t_demux).max(0.0);
-    Ok(Some(Reconstruction {
-        xhat,
-        xgap,
-        cube,
-        gap,
-        joint: run.joint,
-        unmix: run.unmix,
-        seconds: [t_demux, t_gap, (t_all - t_demux - t_gap).max(0.0)],
-    }))
 }
 
 /// The rig's warnings, its calibration's, the frame's, the joint run's, then every result row's
