@@ -43,6 +43,8 @@ pub struct Simulated {
     pub frame: Cube,
     /// The calibration the core built from the twin's captures.
     pub calibration: Calibration,
+    /// `[compute] device`, as the forward model opened it.
+    pub device: OpenDevice,
 }
 
 /// Run the experiment's forward model and its calibration captures once.
@@ -50,9 +52,8 @@ pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Simulated> {
     let materials = Materials::load(lib)?;
     let rig = Rig::build(exp, lib, &materials)?;
     let cache = PatternCache::from_env()?;
-    let (sim, _) = Pipeline::build(exp, &rig, &materials)?
-        .with_pattern_cache(cache.clone())
-        .run()?;
+    let pipeline = Pipeline::build(exp, &rig, &materials)?.with_pattern_cache(cache.clone());
+    let (sim, _) = pipeline.run()?;
     let calibration = run::calibration(exp, &rig, &sim, cache.as_ref())?;
     Ok(Simulated {
         exp: exp.clone(),
@@ -61,6 +62,7 @@ pub fn simulate(exp: &Experiment, lib: &Library) -> Result<Simulated> {
         frame: sim.frame,
         calibration,
         rig,
+        device: pipeline.device().clone(),
     })
 }
 

@@ -219,7 +219,8 @@ pub fn bench(
     let sim = crate::bench::simulate(&exp, lib)?;
     let device = match device {
         Some(d) => OpenDevice::open(d).map_err(|e| e.in_file("--device"))?,
-        None => OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?,
+        // The one the forward model opened (`auto` says once where it stays).
+        None => sim.device.clone(),
     };
     say!(
         text,

@@ -10,7 +10,9 @@ mod reconstructor;
 
 pub use reconstructor::{DeviceReconstructor, FrameRun};
 
-/// The device a run computes on: the CPU, or one GPU context its GPU stages share.
+/// The device a run computes on: the CPU, or one GPU context its GPU stages share (a clone
+/// shares the context).
+#[derive(Clone)]
 pub struct OpenDevice {
     #[cfg(feature = "gpu")]
     gpu: Option<specmux_gpu::GpuContext>,
