@@ -199,7 +199,7 @@ pub struct RunReport {
     /// Per frame: calibration, demultiplexing, crosstalk, de-aliasing and unmixing.
     pub reconstruction_seconds: f64,
     /// Where the frame was reconstructed (`[compute] device`): "CPU, N threads" or "GPU NAME
-    /// (…)"; a method without a GPU kernel says so.
+    /// (…)"; on a GPU device without a kernel for the method or frame, the CPU and why.
     pub reconstruction_device: String,
     pub total_seconds: f64,
 }
@@ -784,7 +784,10 @@ mod gpu_tests {
         let pnp = report("joint", "pnp", "gpu");
         assert!(
             pnp.reconstruction_device.starts_with("CPU")
-                && pnp.reconstruction_device.contains("no GPU kernel"),
+                && pnp.reconstruction_device.contains("no kernel for this")
+                && pnp
+                    .reconstruction_device
+                    .contains("reconstruct.joint.prior"),
             "{}",
             pnp.reconstruction_device
         );

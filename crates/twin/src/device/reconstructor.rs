@@ -1,6 +1,7 @@
 //! A rig's reconstruction on the device a run opened, built once and run on frame after frame:
 //! the core's `Reconstructor` on the CPU, or specmux-gpu's chain built from it (feature `gpu`)
-//! where the device is a GPU and the method has a kernel (plug-and-play has none: the CPU's).
+//! where the device is a GPU with a kernel for it (plug-and-play and frame sides with a prime
+//! factor above 5 have none: the CPU's).
 
 use super::OpenDevice;
 use specmux_core::gap::GapStats;
@@ -41,8 +42,9 @@ pub struct FrameRun {
 }
 
 impl DeviceReconstructor {
-    /// `recon` on `device`: the GPU's chain where the device is one and the method has a
-    /// kernel, else the CPU (and [`DeviceReconstructor::describe`] says why).
+    /// `recon` on `device`: the GPU's chain where the device is one and has a kernel for the
+    /// method and the frame (plug-and-play and sides with a prime factor above 5 have none),
+    /// else the CPU, and [`DeviceReconstructor::describe`] says why.
     pub fn new(device: &OpenDevice, recon: Reconstructor) -> Result<DeviceReconstructor> {
         #[cfg(feature = "gpu")]
         if let Some(ctx) = device.gpu() {
@@ -52,9 +54,12 @@ impl DeviceReconstructor {
                     let cube = g.output_cube();
                     (Some((ctx.clone(), Box::new(g), cube)), device.describe())
                 }
-                Err(GpuError::Unsupported(_)) => {
+                Err(GpuError::Unsupported(why)) => {
                     let cpu = OpenDevice::cpu().describe();
-                    (None, format!("{cpu}: the method has no GPU kernel"))
+                    (
+                        None,
+                        format!("{cpu}: the GPU has no kernel for this: {why}"),
+                    )
                 }
                 Err(e) => return Err(e.into()),
             };
