@@ -276,7 +276,7 @@ pub fn rehearsal(
         sim: sim.clone(),
         exp,
         rig,
-        device: OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?,
+        device: sim.device(),
         recon: None,
         rows: Vec::new(),
         cubes: keep_cubes.then(Vec::new),

@@ -11,6 +11,7 @@ use crate::patterns::{self, PictureOptics};
 use crate::plan::{timing_of, DeviceLimits};
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
+use specmux_twin::device::OpenDevice;
 use specmux_twin::forward::Pipeline;
 use specmux_twin::pattern_cache::PatternCache;
 use specmux_twin::scene::{self, Materials};
@@ -72,6 +73,8 @@ pub struct Light {
     /// The scene and its channels when nothing moves.
     still: Option<(Cube, Cube)>,
     pictures: HashMap<BitPlane, Picture>,
+    /// `[compute] device`, as the twin's forward model opened it.
+    device: OpenDevice,
 }
 
 impl Light {
@@ -79,9 +82,9 @@ impl Light {
     pub fn new(exp: &Experiment, lib: &Library) -> Result<(Light, Rig)> {
         let materials = Materials::load(lib)?;
         let rig = Rig::build(exp, lib, &materials)?;
-        let (sim, _) = Pipeline::build(exp, &rig, &materials)?
-            .with_pattern_cache(PatternCache::from_env()?)
-            .run()?;
+        let pipeline =
+            Pipeline::build(exp, &rig, &materials)?.with_pattern_cache(PatternCache::from_env()?);
+        let (sim, _) = pipeline.run()?;
         let timing = timing_of(exp);
         let mut cfg = exp.rig.sensor.clone().unwrap_or_default();
         cfg.exposure_s = timing.camera.exposure_s;
@@ -117,8 +120,14 @@ impl Light {
             sensor,
             still,
             pictures,
+            device: pipeline.device().clone(),
         };
         Ok((light, rig))
+    }
+
+    /// The device the twin's forward model opened (`[compute] device`).
+    pub(crate) fn device(&self) -> &OpenDevice {
+        &self.device
     }
 
     /// Which binary picture images to what (the DMD's lookup).

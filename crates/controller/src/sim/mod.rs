@@ -244,6 +244,12 @@ impl SimRig {
         self.bench.borrow().log.entries().to_vec()
     }
 
+    /// `[compute] device`, as the twin opened it (a clone shares its context): the
+    /// rehearsal reconstructs its frames there.
+    pub fn device(&self) -> specmux_twin::device::OpenDevice {
+        self.bench.borrow().light.device().clone()
+    }
+
     /// The virtual clock, seconds.
     pub fn now_s(&self) -> f64 {
         secs(self.bench.borrow().now)
