@@ -636,7 +636,10 @@ pub fn work_precision_plot(
             .collect();
         let points: Vec<(f64, f64)> = front.iter().map(|r| (r.seconds.ln(), r.psnr_db)).collect();
         let spans = ((x1 / x0).ln(), p1 - p0 + 2.0 * pad);
-        let spots = label_spots(&points, &labels, spans, pad);
+        let others: Vec<(f64, f64)> = (ok.iter().filter(|r| !r.pareto))
+            .map(|r| (r.seconds.ln(), r.psnr_db))
+            .collect();
+        let spots = label_spots(&points, &labels, &others, spans, pad);
         // A label moved off its first spot is tied to its point by a thin line.
         let leaders = points.iter().zip(&spots).filter_map(|(&p, spot)| {
             let end = spot.leader?;
@@ -731,13 +734,16 @@ struct LabelSpot {
 }
 
 /// Where each Pareto label goes ([`LabelSpot`]). The first spot is right of and just below
-/// the point; where that would cover a label already placed or another point, above the point,
-/// then left of it (the front rises to the right, so up and left of a point is free of
-/// others), then below the label before it. Sizes are estimated from the 13-px font and 5-px
-/// dots on the plot's ~880 × 560 px area spanning `spans` (ln seconds, dB).
+/// the point; where that would cover a label already placed, another labelled point or one of
+/// the `others` (the points off the front), above the point, then left of it (the front rises
+/// to the right, so up and left of a point is free of others), then below the label before it,
+/// then further below, left and above; where every spot covers something, the one that covers
+/// least. Sizes are estimated from the 13-px font and 5-px dots on the plot's ~880 × 560 px
+/// area spanning `spans` (ln seconds, dB).
 fn label_spots(
     points: &[(f64, f64)],
     labels: &[String],
+    others: &[(f64, f64)],
     spans: (f64, f64),
     pad: f64,
 ) -> Vec<LabelSpot> {
@@ -747,26 +753,40 @@ fn label_spots(
     let mut spots = Vec::new();
     for (i, (&(px, py), label)) in points.iter().zip(labels).enumerate() {
         let w = label.chars().count() as f64 * 7.0 / 880.0 * spans.0;
-        let free = |&(x, ty): &(f64, f64)| {
-            let on_label = placed
-                .iter()
-                .any(|&(lx, ly, lw)| x < lx + lw && lx < x + w && (ty - ly).abs() < h);
-            let on_point = points.iter().enumerate().any(|(j, &(qx, qy))| {
-                let inside_x = qx + dot.0 > x && qx - dot.0 < x + w;
-                j != i && inside_x && qy + dot.1 > ty - h && qy - dot.1 < ty
-            });
-            !on_label && !on_point
+        // What a label at (x, ty) would cover: labels placed, and points but its own.
+        let covers = |&(x, ty): &(f64, f64)| {
+            let on_labels = (placed.iter())
+                .filter(|&&(lx, ly, lw)| x < lx + lw && lx < x + w && (ty - ly).abs() < h)
+                .count();
+            let obstacles = (points.iter().enumerate())
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| q)
+                .chain(others);
+            let on_points = obstacles
+                .filter(|&&(qx, qy)| {
+                    let inside_x = qx + dot.0 > x && qx - dot.0 < x + w;
+                    inside_x && qy + dot.1 > ty - h && qy - dot.1 < ty
+                })
+                .count();
+            on_labels + on_points
         };
         let right = px + 0.04;
         let below_last = placed.last().map_or(py, |&(_, ly, _)| ly - 1.05 * h);
         let first = (right, py - 0.15 * pad);
+        let left = px - 0.04 - w;
         let candidates = [
             first,
             (right, py + 1.1 * h),
-            (px - 0.04 - w, py + 0.5 * h),
+            (left, py + 0.5 * h),
             (right, below_last),
+            (right, py - 1.2 * h),
+            (left, py - 0.6 * h),
+            (right, py + 2.2 * h),
         ];
-        let (x, ty) = candidates.into_iter().find(free).unwrap_or(first);
+        // The first free spot; where none is, the one that covers least.
+        let (x, ty) = (candidates.into_iter().enumerate())
+            .min_by_key(|&(k, c)| (covers(&c), k))
+            .map_or(first, |(_, c)| c);
         let meets = if x < px { x + w } else { x };
         let leader = ((x, ty) != first).then_some((meets, ty - 0.5 * h));
         placed.push((x, ty, w));
@@ -1091,7 +1111,7 @@ mod tests {
         let h = 16.0 / 560.0 * spans.1;
         // Two points on top of each other, then one far away.
         let pts = [(0.0, 17.0), (0.01, 17.02), (3.0, 22.0)];
-        let spots = label_spots(&pts, &labels, spans, 0.5);
+        let spots = label_spots(&pts, &labels, &[], spans, 0.5);
         let unmoved = |at| LabelSpot { at, leader: None };
         assert_eq!(spots[0], unmoved((0.04, 17.0 - 0.075)));
         let (x1, y1) = spots[1].at;
@@ -1099,6 +1119,21 @@ mod tests {
         let tied = Some((x1, y1 - 0.5 * h));
         assert_eq!(spots[1].leader, tied, "a moved label is tied to its point");
         assert_eq!(spots[2], unmoved((3.04, 22.0 - 0.075)));
+    }
+
+    /// A point off the front where a label would go moves the label as a labelled point does.
+    #[test]
+    fn a_label_moves_off_a_point_that_is_not_on_the_front() {
+        let labels = vec!["gap 20 it".to_string()];
+        let spans = (4.0, 10.0);
+        let pts = [(0.0, 17.0)];
+        let first = label_spots(&pts, &labels, &[], spans, 0.5)[0];
+        assert_eq!(first.leader, None);
+        let (x, y) = first.at;
+        // A point in the middle of that first spot.
+        let spot = label_spots(&pts, &labels, &[(x + 0.1, y - 0.1)], spans, 0.5)[0];
+        assert_ne!(spot.at, first.at, "{spot:?}");
+        assert!(spot.leader.is_some(), "{spot:?}");
     }
 
     /// A label whose first spot is taken by its neighbour's label and whose spot above holds the
@@ -1109,7 +1144,7 @@ mod tests {
         let spans = (4.0, 10.0);
         let (h, w) = (16.0 / 560.0 * spans.1, 9.0 * 7.0 / 880.0 * spans.0);
         let pts = [(0.0, 17.0), (0.01, 17.05), (0.1, 17.4)];
-        let spot = label_spots(&pts, &labels, spans, 0.5)[1];
+        let spot = label_spots(&pts, &labels, &[], spans, 0.5)[1];
         let (x, y) = spot.at;
         assert!((x - (0.01 - 0.04 - w)).abs() < 1e-12 && (y - (17.05 + 0.5 * h)).abs() < 1e-12);
         let (lx, ly) = spot.leader.unwrap();
