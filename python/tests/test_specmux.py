@@ -85,6 +85,23 @@ def test_full_reconstruction_and_metrics(exp, sim):
         specmux.metrics(sim["truth"], sim["truth"][:, :10, :10])
 
 
+def test_the_reconstruction_runs_on_the_experiments_device(exp, sim):
+    """`[compute] device` names where `reconstruct` and a `Reconstructor` run, and the result says
+    it; this wheel has no GPU backend, so "gpu" is refused by its key and "auto" stays on the CPU."""
+    full = specmux.reconstruct(exp, sim["frame"], full=True)
+    assert full["device"].startswith("CPU"), full["device"]
+    assert specmux.Reconstructor(exp).device.startswith("CPU")
+    d = exp.to_dict()
+    d["compute"] = {"device": "auto"}
+    auto = specmux.Experiment.from_dict(d)
+    assert specmux.reconstruct(auto, sim["frame"], full=True)["device"].startswith("CPU")
+    d["compute"] = {"device": "gpu"}
+    gpu = specmux.Experiment.from_dict(d)
+    for call in (lambda: specmux.reconstruct(gpu, sim["frame"]), lambda: specmux.Reconstructor(gpu)):
+        with pytest.raises(specmux.SpecmuxError, match=r"compute\.device.*--features gpu"):
+            call()
+
+
 def test_a_reconstructor_built_once_gives_what_reconstruct_gives(exp, sim, cube):
     recon = specmux.Reconstructor(exp)
     assert recon.shape == (SIZE, SIZE)

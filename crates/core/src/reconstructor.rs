@@ -77,7 +77,7 @@ impl ComputeDevice {
             file,
             "compute.device",
             "\"gpu\"",
-            "this specmux was built without the GPU backend: cargo build --release --features gpu",
+            "this specmux was built without the GPU backend: cargo build --release --features gpu (the Python package: MATURIN_PEP517_ARGS=\"--features gpu\" pip install ./python)",
         )
     }
 }

@@ -15,6 +15,7 @@ use specmux_core::reconstructor::{Reconstruction, Reconstructor};
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_report::commands::{frame_calibration, frame_experiment, size_note, Measured};
+use specmux_twin::device::{DeviceReconstructor, OpenDevice};
 use specmux_twin::experiment::Experiment;
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
@@ -33,9 +34,10 @@ use std::path::PathBuf;
 /// Returns the cube (bands, height, width) float32, or with `full=True` a dict with `cube`,
 /// `xhat` (demultiplexed channels), `xgap` (after de-aliasing), the `unmix`, `gap` and `joint`
 /// statistics, `calibration` (`source` and the measured `carriers`) and `seconds`
-/// (demultiplex, de-alias, unmix) and `mean_snr` (the frame's mean signal over its noise, None
-/// without a camera noise model and a dark frame). A frame under its noise raises a
-/// `UserWarning`. The GIL is released while it runs.
+/// (demultiplex, de-alias, unmix), `mean_snr` (the frame's mean signal over its noise, None
+/// without a camera noise model and a dark frame) and `device` (where it ran: the experiment's
+/// `[compute] device`, a GPU only in a build with the `gpu` feature). A frame under its noise
+/// raises a `UserWarning`. The GIL is released while it runs.
 #[pyfunction]
 #[pyo3(signature = (exp, frame, calibration = None, full = false, spectra = None))]
 pub fn reconstruct<'py>(
@@ -56,22 +58,22 @@ pub fn reconstruct<'py>(
         .map(|c| calibration::from_dict(c, frame.width, frame.height))
         .transpose()?;
     let lib = library(spectra);
-    let (out, cal, snr, warnings) = interruptible(py, move || -> specmux_core::Result<_> {
-        let (recon, cal) = calibrated(&e, measured.as_ref(), &lib)?;
-        let snr = recon.frame_snr(&frame)?;
-        Ok((recon.run(&frame, None)?, cal, snr, recon.warnings(snr)))
+    let (out, cal, snr, recon) = interruptible(py, move || -> specmux_core::Result<_> {
+        let (mut recon, cal) = calibrated(&e, measured.as_ref(), &lib)?;
+        let snr = recon.reconstructor().frame_snr(&frame)?;
+        Ok((recon.stages(&frame, None)?, cal, snr, recon))
     })?
     .map_err(err)?;
-    result(py, out, &cal, snr, &warnings, full)
+    result(py, out, &recon, &cal, snr, full)
 }
 
-/// The rig's reconstructor for experiment `e` (its frame size set), calibrated from the user's
-/// `measured` frames or, without them, the twin's captures of the rig.
+/// The rig's reconstructor for experiment `e` (its frame size set) on its `[compute] device`,
+/// calibrated from the user's `measured` frames or, without them, the twin's captures of the rig.
 fn calibrated(
     e: &Experiment,
     measured: Option<&CalibrationFrames>,
     lib: &Library,
-) -> specmux_core::Result<(Reconstructor, Calibration)> {
+) -> specmux_core::Result<(DeviceReconstructor, Calibration)> {
     let materials = Materials::load(lib)?;
     let rig = Rig::build(e, lib, &materials)?;
     let measured = measured.map(|frames| Measured {
@@ -80,21 +82,23 @@ fn calibrated(
         key: "calibration",
     });
     let cal = frame_calibration(e, &rig, &materials, measured, Some(&kept()?))?;
-    let recon = Reconstructor::new(&e.reconstruct, &rig.design(), &cal, &e.file)?;
-    Ok((recon, cal))
+    let device = OpenDevice::open(e.compute.device).map_err(|x| x.in_file(&e.file))?;
+    let table = device.auto_table();
+    let recon = Reconstructor::for_device(&e.reconstruct, &rig.design(), &cal, &e.file, table)?;
+    Ok((DeviceReconstructor::new(&device, recon)?, cal))
 }
 
-/// What `reconstruct` returns: the cube, or with `full` the dict of every step; the warnings
-/// raised as `UserWarning`s first.
+/// What `reconstruct` returns: the cube, or with `full` the dict of every step; `recon`'s
+/// warnings for the frame raised as `UserWarning`s first.
 fn result<'py>(
     py: Python<'py>,
     out: Reconstruction,
+    recon: &DeviceReconstructor,
     cal: &Calibration,
     snr: Option<f64>,
-    warnings: &[String],
     full: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
-    warn(py, warnings)?;
+    warn(py, &recon.reconstructor().warnings(snr))?;
     if !full {
         return Ok(cube_array(py, out.cube)?.into_any());
     }
@@ -108,6 +112,7 @@ fn result<'py>(
     d.set_item("calibration", c)?;
     d.set_item("seconds", out.seconds.to_vec())?;
     d.set_item("mean_snr", snr)?;
+    d.set_item("device", recon.describe())?;
     d.set_item("cube", cube_array(py, out.cube)?)?;
     d.set_item("xhat", cube_array(py, out.xhat)?)?;
     d.set_item("xgap", cube_array(py, out.xgap)?)?;
@@ -131,14 +136,14 @@ fn warn(py: Python<'_>, warnings: &[String]) -> PyResult<()> {
 /// applied to frame after frame, as a camera loop does: `Reconstructor(exp, calibration=None)`
 /// calibrates as `reconstruct` does (from the dict of measured frames, or the twin's captures);
 /// calling it on a frame gives what `reconstruct(exp, frame)` gives, without building the rig,
-/// the calibration and the factorisations again; `realtime(frame, out=None)` runs the real-time
-/// path (demultiplexing and the exact non-negative unmixing, no de-aliasing), the channels in a
-/// cube it keeps and the bands straight into `out` when given. The GIL is released while either
-/// runs.
+/// the calibration and the factorisations again, on the experiment's `[compute] device`;
+/// `realtime(frame, out=None)` runs the real-time path on the CPU (demultiplexing and the exact
+/// non-negative unmixing, no de-aliasing), the channels in a cube it keeps and the bands
+/// straight into `out` when given. The GIL is released while either runs.
 #[pyclass(name = "Reconstructor", module = "specmux")]
 pub struct PyReconstructor {
     exp: Experiment,
-    recon: Reconstructor,
+    recon: DeviceReconstructor,
     cal: Calibration,
     /// The channels of the last `realtime` frame, kept for the next.
     channels: Cube,
@@ -162,8 +167,8 @@ impl PyReconstructor {
         let lib = library(spectra);
         let (recon, cal) =
             interruptible(py, || calibrated(&e, measured.as_ref(), &lib))?.map_err(err)?;
-        warn(py, &recon.warnings(None))?;
-        let channels = Cube::zeros(w, h, recon.demux.windows.len());
+        warn(py, &recon.reconstructor().warnings(None))?;
+        let channels = Cube::zeros(w, h, recon.reconstructor().demux.windows.len());
         Ok(PyReconstructor {
             exp: e,
             recon,
@@ -181,26 +186,31 @@ impl PyReconstructor {
     /// Bands of the cubes it returns.
     #[getter]
     fn bands(&self) -> usize {
-        self.recon.unmixer.bands()
+        self.recon.reconstructor().unmixer.bands()
+    }
+
+    /// Where `__call__` reconstructs (`[compute] device`): "CPU, N threads" or "GPU NAME (…)".
+    #[getter]
+    fn device(&self) -> &str {
+        self.recon.describe()
     }
 
     /// The cube of `frame` by the experiment's method, as `reconstruct(exp, frame, full=…)`.
     #[pyo3(signature = (frame, full = false))]
     fn __call__<'py>(
-        &self,
+        &mut self,
         py: Python<'py>,
         frame: &Bound<'py, PyAny>,
         full: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let frame = self.frame(frame)?;
-        let recon = &self.recon;
+        let recon = &mut self.recon;
         let (out, snr) = interruptible(py, || -> specmux_core::Result<_> {
-            let snr = recon.frame_snr(&frame)?;
-            Ok((recon.run(&frame, None)?, snr))
+            let snr = recon.reconstructor().frame_snr(&frame)?;
+            Ok((recon.stages(&frame, None)?, snr))
         })?
         .map_err(err)?;
-        let warnings = recon.warnings(snr);
-        result(py, out, &self.cal, snr, &warnings, full)
+        result(py, out, &self.recon, &self.cal, snr, full)
     }
 
     /// The real-time path on `frame`: demultiplexing and the exact non-negative unmixing (the
@@ -217,7 +227,7 @@ impl PyReconstructor {
     ) -> PyResult<Bound<'py, PyArray3<f32>>> {
         let frame = self.frame(frame)?;
         let (h, w) = self.shape();
-        let shape = [self.recon.unmixer.bands(), h, w];
+        let shape = [self.recon.reconstructor().unmixer.bands(), h, w];
         let out = match out.map(|a| a.cast_into::<PyArray3<f32>>()).transpose() {
             Err(e) => {
                 let kind = describe(&e.into_inner())?;
@@ -238,7 +248,7 @@ impl PyReconstructor {
         let dst = view
             .as_slice_mut()
             .map_err(|_| err("realtime: out must be a C-contiguous float32 array"))?;
-        let (recon, channels) = (&self.recon, &mut self.channels);
+        let (recon, channels) = (self.recon.reconstructor(), &mut self.channels);
         py.detach(|| -> specmux_core::Result<()> {
             recon.demultiplex_into(&frame, channels)?;
             recon.unmixer.unmix_into_slice(channels, dst).map(|_| ())
