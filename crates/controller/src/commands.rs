@@ -129,7 +129,7 @@ impl Sink for Rehearsal<'_> {
         self.recorder.frame(r, frame)?;
         let recon = self
             .recon
-            .as_mut()
+            .as_ref()
             .ok_or_else(|| Error::device("controller", "a frame before the calibration"))?;
         let f = RecordedFrame {
             frame_id: r.frame_id,

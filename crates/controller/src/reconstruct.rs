@@ -46,7 +46,7 @@ pub struct RecordedFrame {
 
 /// Reconstruct one frame, timed, and compare it with `truth` when there is one.
 pub fn reconstruct_frame(
-    recon: &mut DeviceReconstructor,
+    recon: &DeviceReconstructor,
     f: &RecordedFrame,
     truth: Option<&Cube>,
 ) -> Result<(Cube, ReconstructedFrame)> {
@@ -207,7 +207,7 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
     let device = OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?;
     let table = device.auto_table();
     let recon = Reconstructor::for_device(&exp.reconstruct, &rig.design(), &cal, &exp.file, table)?;
-    let mut recon = DeviceReconstructor::new(&device, recon)?;
+    let recon = DeviceReconstructor::new(&device, recon)?;
     let frames = recorded_frames(dir)?;
     let truths = Truths::read(dir, lib)?;
     let names = band_names(&exp)?;
@@ -218,7 +218,7 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
             Some(t) => t.of(&exp, f.frame_id)?,
             None => None,
         };
-        let (cube, row) = reconstruct_frame(&mut recon, f, truth.as_ref())?;
+        let (cube, row) = reconstruct_frame(&recon, f, truth.as_ref())?;
         exr::write(
             &files.path(&format!("cube-{:06}.exr", f.frame_id)),
             &cube,

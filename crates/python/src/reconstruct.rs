@@ -59,7 +59,7 @@ pub fn reconstruct<'py>(
         .transpose()?;
     let lib = library(spectra);
     let (out, cal, snr, recon) = interruptible(py, move || -> specmux_core::Result<_> {
-        let (mut recon, cal) = calibrated(&e, measured.as_ref(), &lib)?;
+        let (recon, cal) = calibrated(&e, measured.as_ref(), &lib)?;
         let snr = recon.reconstructor().frame_snr(&frame)?;
         Ok((recon.stages(&frame, None)?, cal, snr, recon))
     })?
@@ -198,13 +198,13 @@ impl PyReconstructor {
     /// The cube of `frame` by the experiment's method, as `reconstruct(exp, frame, full=…)`.
     #[pyo3(signature = (frame, full = false))]
     fn __call__<'py>(
-        &mut self,
+        &self,
         py: Python<'py>,
         frame: &Bound<'py, PyAny>,
         full: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
         let frame = self.frame(frame)?;
-        let recon = &mut self.recon;
+        let recon = &self.recon;
         let (out, snr) = interruptible(py, || -> specmux_core::Result<_> {
             let snr = recon.reconstructor().frame_snr(&frame)?;
             Ok((recon.stages(&frame, None)?, snr))

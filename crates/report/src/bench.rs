@@ -376,7 +376,7 @@ pub fn work_precision_on(
             "must be ≥ 1",
         ));
     }
-    let mut runners = grid
+    let runners = grid
         .iter()
         .map(|s| DeviceReconstructor::new(device, reconstructor(sim, s)?))
         .collect::<Result<Vec<_>>>()?;
@@ -386,7 +386,7 @@ pub fn work_precision_on(
     let bar = crate::progress::bar("work–precision runs");
     bar.set_length((repeats * grid.len()) as u64);
     for _ in 0..repeats {
-        for (k, r) in runners.iter_mut().enumerate() {
+        for (k, r) in runners.iter().enumerate() {
             crate::progress::step(&bar, "the work–precision runs")?;
             // Timed from the frame in host memory to the cube in host memory.
             let run = r.run(&sim.frame, outputs[k].is_none())?;

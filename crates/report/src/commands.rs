@@ -104,7 +104,7 @@ fn reconstruct_on_device(
     frame: &Cube,
 ) -> Result<(FrameRun, String)> {
     let t = std::time::Instant::now();
-    let mut on_device = DeviceReconstructor::new(device, recon)?;
+    let on_device = DeviceReconstructor::new(device, recon)?;
     let t_setup = t.elapsed().as_secs_f64();
     let run = on_device.run(frame, false)?;
     let place = on_device.describe();

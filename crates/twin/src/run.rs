@@ -360,7 +360,7 @@ pub fn run_in(
     let t = Instant::now();
     let device = pipeline.device();
     let recon = reconstructor_for(exp, &rig, &sim, cache, device.auto_table())?;
-    let mut on_device = DeviceReconstructor::new(device, recon)?;
+    let on_device = DeviceReconstructor::new(device, recon)?;
     let t_setup = t.elapsed().as_secs_f64();
     let out = on_device.stages(&sim.frame, Some(&sim.exposed))?;
     let reconstruction_device = on_device.describe().to_string();

@@ -12,11 +12,13 @@ use specmux_core::{Cube, Result};
 #[cfg(feature = "gpu")]
 use std::time::Instant;
 
-/// The reconstructor and, on a GPU, its chain with the cube buffer it reads back into.
+/// The reconstructor and, on a GPU, its chain with the cube buffer it reads back into. Frames
+/// may come from several threads: the CPU runs them side by side, the GPU one at a time (its
+/// chain's buffers are one frame's).
 pub struct DeviceReconstructor {
     recon: Reconstructor,
     #[cfg(feature = "gpu")]
-    gpu: Option<GpuChain>,
+    gpu: Option<std::sync::Mutex<GpuChain>>,
     describe: String,
 }
 
@@ -52,14 +54,13 @@ impl DeviceReconstructor {
             let (gpu, describe) = match GpuReconstructor::new(ctx, &recon) {
                 Ok(g) => {
                     let cube = g.output_cube();
-                    (Some((ctx.clone(), Box::new(g), cube)), device.describe())
+                    let chain = (ctx.clone(), Box::new(g), cube);
+                    (Some(std::sync::Mutex::new(chain)), device.describe())
                 }
                 Err(GpuError::Unsupported(why)) => {
                     let cpu = OpenDevice::cpu().describe();
-                    (
-                        None,
-                        format!("{cpu}: the GPU has no kernel for this: {why}"),
-                    )
+                    let why = format!("{cpu}: the GPU has no kernel for this: {why}");
+                    (None, why)
                 }
                 Err(e) => return Err(e.into()),
             };
@@ -98,28 +99,10 @@ impl DeviceReconstructor {
 
     /// Reconstruct `frame`, timed; with `dealiased`, the channels after de-aliasing too (on a
     /// GPU one more submission, outside the time, as is the copy of the cube it read back).
-    pub fn run(&mut self, frame: &Cube, dealiased: bool) -> Result<FrameRun> {
+    pub fn run(&self, frame: &Cube, dealiased: bool) -> Result<FrameRun> {
         #[cfg(feature = "gpu")]
-        if let Some((ctx, g, cube)) = &mut self.gpu {
-            let t = Instant::now();
-            let run = g.run_into(ctx, frame, cube)?;
-            let seconds = t.elapsed().as_secs_f64();
-            let (dealiased, gap) = match dealiased {
-                true => {
-                    let (x, gap) = g.dealias(ctx, frame)?;
-                    (Some(x), gap)
-                }
-                false => (None, run.gap),
-            };
-            return Ok(FrameRun {
-                cube: cube.clone(),
-                seconds,
-                stage_seconds: [f64::NAN; 3],
-                gap,
-                unmix: run.unmix,
-                joint: run.joint,
-                dealiased,
-            });
+        if let Some(chain) = &self.gpu {
+            return gpu_run(&mut lock(chain), frame, dealiased);
         }
         let out = self.recon.run(frame, None)?;
         Ok(FrameRun {
@@ -138,16 +121,18 @@ impl DeviceReconstructor {
     /// against, on the CPU). On a GPU three submissions from the raw frame: x̂, the de-aliased
     /// channels, then the whole chain, whose time is the frame's; each stage's seconds are the
     /// difference between the runs that end after it and before it.
-    pub fn stages(&mut self, frame: &Cube, exposed: Option<&Cube>) -> Result<Reconstruction> {
+    pub fn stages(&self, frame: &Cube, exposed: Option<&Cube>) -> Result<Reconstruction> {
         #[cfg(feature = "gpu")]
-        if let Some((ctx, g, _)) = &self.gpu {
+        if let Some(chain) = &self.gpu {
+            let mut chain = lock(chain);
+            let (ctx, g, _) = &*chain;
             let t = Instant::now();
             let xhat = g.demultiplex(ctx, frame)?;
             let t_demux = t.elapsed().as_secs_f64();
             let t = Instant::now();
             let (xgap, gap) = g.dealias(ctx, frame)?;
             let t_gap = (t.elapsed().as_secs_f64() - t_demux).max(0.0);
-            let run = self.run(frame, false)?;
+            let run = gpu_run(&mut chain, frame, false)?;
             return Ok(Reconstruction {
                 xhat,
                 xgap,
@@ -160,4 +145,38 @@ impl DeviceReconstructor {
         }
         self.recon.run(frame, exposed)
     }
+}
+
+/// The GPU chain, for one frame at a time (a thread that panicked holding it left no state a
+/// later frame reads: every run rewrites the chain's buffers from the frame).
+#[cfg(feature = "gpu")]
+fn lock(chain: &std::sync::Mutex<GpuChain>) -> std::sync::MutexGuard<'_, GpuChain> {
+    chain
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// [`DeviceReconstructor::run`] on the GPU's chain.
+#[cfg(feature = "gpu")]
+fn gpu_run(chain: &mut GpuChain, frame: &Cube, dealiased: bool) -> Result<FrameRun> {
+    let (ctx, g, cube) = chain;
+    let t = Instant::now();
+    let run = g.run_into(ctx, frame, cube)?;
+    let seconds = t.elapsed().as_secs_f64();
+    let (dealiased, gap) = match dealiased {
+        true => {
+            let (x, gap) = g.dealias(ctx, frame)?;
+            (Some(x), gap)
+        }
+        false => (None, run.gap),
+    };
+    Ok(FrameRun {
+        cube: cube.clone(),
+        seconds,
+        stage_seconds: [f64::NAN; 3],
+        gap,
+        unmix: run.unmix,
+        joint: run.joint,
+        dealiased,
+    })
 }
