@@ -16,7 +16,7 @@ use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_io::exr;
 use specmux_io::output_set::OutputSet;
-use specmux_twin::device::{DeviceReconstructor, OpenDevice};
+use specmux_twin::device::DeviceReconstructor;
 use specmux_twin::scene::{build_at, Materials};
 use specmux_twin::{Experiment, Rig};
 use std::path::{Path, PathBuf};
@@ -204,7 +204,7 @@ fn reconstruct_in(dir: &Path, out: &Path, lib: &Library) -> Result<String> {
     let rig = Rig::build(&exp, lib, &Materials::load(lib)?)?;
     let frames_cal = record::read_calibration(dir)?;
     let cal = Calibration::from_frames(&rig.carriers, &frames_cal, exp.calibration.search_bins)?;
-    let device = OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?;
+    let device = exp.open_device()?;
     let table = device.auto_table();
     let recon = Reconstructor::for_device(&exp.reconstruct, &rig.design(), &cal, &exp.file, table)?;
     let recon = DeviceReconstructor::new(&device, recon)?;

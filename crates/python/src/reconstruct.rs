@@ -15,7 +15,7 @@ use specmux_core::reconstructor::{Reconstruction, Reconstructor};
 use specmux_core::spectral::Library;
 use specmux_core::Cube;
 use specmux_report::commands::{frame_calibration, frame_experiment, size_note, Measured};
-use specmux_twin::device::{DeviceReconstructor, OpenDevice};
+use specmux_twin::device::DeviceReconstructor;
 use specmux_twin::experiment::Experiment;
 use specmux_twin::scene::Materials;
 use specmux_twin::Rig;
@@ -82,7 +82,7 @@ fn calibrated(
         key: "calibration",
     });
     let cal = frame_calibration(e, &rig, &materials, measured, Some(&kept()?))?;
-    let device = OpenDevice::open(e.compute.device).map_err(|x| x.in_file(&e.file))?;
+    let device = e.open_device()?;
     let table = device.auto_table();
     let recon = Reconstructor::for_device(&e.reconstruct, &rig.design(), &cal, &e.file, table)?;
     Ok((DeviceReconstructor::new(&device, recon)?, cal))

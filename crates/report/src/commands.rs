@@ -701,7 +701,7 @@ pub fn reconstruct(
     let cache = PatternCache::from_env()?;
     let cal = frame_calibration(&exp, &rig, &materials, measured, cache.as_ref())?;
     say!(text, "calibration: {}", cal.source);
-    let device = OpenDevice::open(exp.compute.device).map_err(|e| e.in_file(&exp.file))?;
+    let device = exp.open_device()?;
     let design = rig.design();
     let table = device.auto_table();
     let recon = Reconstructor::for_device(&exp.reconstruct, &design, &cal, &exp.file, table)?;

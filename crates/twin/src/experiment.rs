@@ -4,6 +4,7 @@
 //! takes the 2019 prototype's value.
 
 use crate::captures::CaptureConfig;
+use crate::device::OpenDevice;
 use crate::optics::alignment::AlignmentConfig;
 use crate::optics::dmd::DmdConfig;
 use crate::optics::fourier_filter::FourierFilterConfig;
@@ -85,6 +86,20 @@ impl RigConfig {
 }
 
 impl Experiment {
+    /// Open `[compute] device` ([`OpenDevice::open`]); a failure names the file, the key and
+    /// its value.
+    pub fn open_device(&self) -> Result<OpenDevice> {
+        OpenDevice::open(self.compute.device).map_err(|e| self.on_device(e))
+    }
+
+    /// `e`, a failure of the device `[compute] device` names, naming the file, the key and its
+    /// value.
+    pub fn on_device(&self, e: Error) -> Error {
+        let device = format!("{:?}", self.compute.device).to_lowercase();
+        e.in_file(&self.file)
+            .within(&self.file, "compute.device", device)
+    }
+
     /// Parse an experiment from TOML text; errors carry `file` and the line of the fault.
     pub fn from_toml(text: &str, file: &str) -> Result<Experiment> {
         Experiment::from_text(text, file, true)

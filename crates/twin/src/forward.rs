@@ -168,17 +168,10 @@ fn timed<In, Out>(times: &mut Vec<StageTime>, step: &dyn Step<In, Out>, input: &
     Ok(out)
 }
 
-/// A failure to open `[compute] device`, naming the key and its value.
-fn on_device(exp: &Experiment, e: specmux_core::Error) -> specmux_core::Error {
-    let device = format!("{:?}", exp.compute.device).to_lowercase();
-    e.in_file(&exp.file)
-        .within(&exp.file, "compute.device", device)
-}
-
 impl Pipeline {
     /// The stages this experiment needs, in light-path order.
     pub fn build(exp: &Experiment, rig: &Rig, materials: &Materials) -> Result<Pipeline> {
-        let device = OpenDevice::open(exp.compute.device).map_err(|e| on_device(exp, e))?;
+        let device = exp.open_device()?;
         let w = &rig.projection.w;
         let rows: Vec<Vec<f64>> = w.row_iter().map(|r| r.iter().cloned().collect()).collect();
         let patterns = if exp.rig.has_optics() {
@@ -205,7 +198,7 @@ impl Pipeline {
             timing: exp.rig.timing.as_ref().map(timing_stage).transpose()?,
             multiplex: MultiplexStage {
                 device: for_device(&device, (rig.width, rig.height, rig.imaged_carriers.len()))
-                    .map_err(|e| on_device(exp, e))?,
+                    .map_err(|e| exp.on_device(e))?,
                 timed: exp.rig.timing.is_some(),
             },
             sensor: match &exp.rig.sensor {
