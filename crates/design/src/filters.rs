@@ -429,12 +429,9 @@ fn sim_table(sims: &[Simulated], chosen: usize) -> String {
 /// The colour of each filter: its transmittance seen under equal-energy white (`col`, on
 /// [`Grid::VISIBLE`]), at full brightness.
 fn chips(curves: &[Curve], col: &Colorimetry) -> Vec<[u8; 3]> {
-    let on_grid = |c: &Curve| -> Vec<f64> {
-        (Grid::VISIBLE.wavelengths().iter())
-            .map(|&w| c.eval(w))
-            .collect()
-    };
-    curves.iter().map(|c| col.chip(&on_grid(c))).collect()
+    (curves.iter())
+        .map(|c| col.chip(&c.sample(&Grid::VISIBLE)))
+        .collect()
 }
 
 /// `wheel.toml`, the curve PNGs and `report.json`; returns the lines naming them.

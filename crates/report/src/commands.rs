@@ -867,11 +867,7 @@ pub fn filter_chips(exp: &Experiment, lib: &Library) -> Result<Vec<[u8; 3]>> {
         .wheel
         .filters
         .iter()
-        .map(|name| {
-            let t = exp.curve(lib, name)?;
-            let spectrum: Vec<f64> = grid.wavelengths().iter().map(|&w| t.eval(w)).collect();
-            Ok(col.chip(&spectrum))
-        })
+        .map(|name| Ok(col.chip(&exp.curve(lib, name)?.sample(&grid))))
         .collect()
 }
 
