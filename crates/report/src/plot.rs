@@ -435,18 +435,23 @@ pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
     };
     let p90 = norms[norms.len() * 9 / 10];
     let (floor, ceiling) = (0.5 * median, 2.0 * p90);
-    let lit = |c: &&(usize, usize, Vec<f32>)| {
-        let n = norm(&c.2);
-        n > 0.0 && n >= floor && n <= ceiling
-    };
-    let off_p90 = |c: &&(usize, usize, Vec<f32>)| (norm(&c.2) - p90).abs();
-    let Some(first) = (cands.iter().filter(lit)).min_by(|a, b| off_p90(a).total_cmp(&off_p90(b)))
-    else {
+    let lit: Vec<&(usize, usize, Vec<f32>)> = (cands.iter())
+        .filter(|c| {
+            let n = norm(&c.2);
+            n > 0.0 && n >= floor && n <= ceiling
+        })
+        .collect();
+    let off_p90 = |c: &&&(usize, usize, Vec<f32>)| (norm(&c.2) - p90).abs();
+    let Some(&first) = lit.iter().min_by(|a, b| off_p90(a).total_cmp(&off_p90(b))) else {
         return Vec::new();
     };
     let mut chosen = vec![first];
-    while chosen.len() < count.min(cands.len()) {
-        let next = cands.iter().filter(lit).max_by(|a, b| {
+    while chosen.len() < count.min(lit.len()) {
+        // A pixel already chosen is at angle 0 from itself, and may tie with the farthest.
+        let unchosen = lit
+            .iter()
+            .filter(|c| !chosen.iter().any(|d| std::ptr::eq(**c, *d)));
+        let next = unchosen.max_by(|a, b| {
             let da = chosen
                 .iter()
                 .map(|c| angle(&a.2, &c.2))
@@ -458,7 +463,7 @@ pub fn distinct_pixels(truth: &Cube, count: usize) -> Vec<(usize, usize)> {
             da.total_cmp(&db)
         });
         match next {
-            Some(n) => chosen.push(n),
+            Some(&n) => chosen.push(n),
             None => break,
         }
     }
@@ -632,6 +637,21 @@ mod tests {
             vec![vec![1.0, 5.0, 1.0], vec![5.0, 1.0, 1.0]],
             "{px:?}"
         );
+    }
+
+    /// Asked for more pixels than are lit, it gives each lit pixel once (two of a 2 × 2 cube's
+    /// four: two are black), not one of them twice.
+    #[test]
+    fn distinct_pixels_never_repeat_a_pixel() {
+        let mut c = Cube::zeros(2, 2, 3);
+        for (p, v) in [(2, 1.0), (3, 2.0)] {
+            for k in 0..3 {
+                c.data[k * 4 + p] = v * (k + 1) as f32;
+            }
+        }
+        let mut px = distinct_pixels(&c, 3);
+        px.sort();
+        assert_eq!(px, vec![(0, 1), (1, 1)]);
     }
 
     #[test]
